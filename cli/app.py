@@ -1,0 +1,33 @@
+"""Entry point of the ``dopt`` command line: a thin Typer layer over the library."""
+
+from typing import Optional
+
+import typer
+
+from sb3_disagree.version import __version__
+
+app = typer.Typer(
+    name="dopt",
+    help="Disagreement Options: learn a new navigation goal by reusing the policies you already have.",
+    no_args_is_help=True,
+    add_completion=False,
+)
+
+
+def _version_callback(value: bool) -> None:
+    if value:
+        typer.echo(f"dopt (sb3-disagree) {__version__}")
+        raise typer.Exit()
+
+
+@app.callback()
+def _root(
+    version: Optional[bool] = typer.Option(
+        None, "--version", callback=_version_callback, is_eager=True, help="Print the version and exit."
+    ),
+) -> None:
+    """Disagreement Options on Stable-Baselines3."""
+
+
+def main() -> None:
+    app()

@@ -1,0 +1,414 @@
+"""ACER: Sample Efficient Actor-Critic with Experience Replay (Wang et al. 2016), discrete actions."""
+
+import io
+import pathlib
+from typing import Any, ClassVar, Optional, TypeVar, Union
+
+import numpy as np
+import torch as th
+from gymnasium import spaces
+from stable_baselines3.common.base_class import BaseAlgorithm
+from stable_baselines3.common.callbacks import BaseCallback
+from stable_baselines3.common.on_policy_algorithm import OnPolicyAlgorithm
+from stable_baselines3.common.policies import BasePolicy
+from stable_baselines3.common.save_util import load_from_pkl, save_to_pkl
+from stable_baselines3.common.type_aliases import GymEnv, MaybeCallback, Schedule
+from stable_baselines3.common.utils import obs_as_tensor
+from stable_baselines3.common.vec_env import VecEnv
+
+from sb3_disagree.acer.buffers import Segment, SegmentReplayBuffer
+from sb3_disagree.acer.objectives import EPS, policy_terms, retrace_targets, trust_region_project
+from sb3_disagree.acer.policies import ACERPolicy, CnnPolicy, MlpPolicy
+from sb3_disagree.behaviour import BehaviourPolicy, OnPolicyBehaviour
+
+SelfACER = TypeVar("SelfACER", bound="ACER")
+
+
+class ACER(BaseAlgorithm):
+    """
+    Actor-Critic with Experience Replay (ACER) for discrete actions, with a behaviour-policy hook.
+
+    Each iteration collects ``n_steps`` per env with the behaviour policy, stores the segment with the
+    behaviour distribution mu, does one on-policy update on it, then ``Poisson(replay_ratio)`` updates
+    on segments drawn from the replay buffer once it holds ``replay_start`` transitions.
+
+    Paper: https://arxiv.org/abs/1611.01224. The implementation details, each with its equation, are
+    listed in ``docs/acer.md``.
+
+    :param policy: The policy model to use (MlpPolicy, CnnPolicy, ...)
+    :param env: The environment to learn from (if registered in Gym, can be str)
+    :param learning_rate: The learning rate, a constant or a function of the remaining progress (from 1 to 0)
+    :param n_steps: Length of a segment: env steps per env between updates
+    :param gamma: Discount factor
+    :param buffer_size: Replay capacity in env transitions over all envs, stored as whole segments
+    :param replay_ratio: Mean of the Poisson number of replay updates after each on-policy update
+        (0 gives on-policy ACER)
+    :param replay_start: Number of stored transitions (over all envs) before replay updates begin
+    :param q_coef: Weight of the Q-value loss
+    :param ent_coef: Weight of the entropy bonus
+    :param max_grad_norm: Clip of the global gradient norm
+    :param c: Truncation of the importance weights in the policy gradient (bias correction beyond it)
+    :param trust_region: Whether to use the efficient trust region against the average policy network
+    :param alpha: Decay of the average policy network, updated after every optimizer step
+    :param delta: Bound of the trust region
+    :param behaviour: The behaviour policy that chooses the actions during rollouts; sampling from the
+        current policy if None. It is not saved with the model.
+    :param stats_window_size: Window size for the rollout logging, number of episodes to average
+    :param tensorboard_log: The log location for tensorboard (if None, no logging)
+    :param policy_kwargs: Additional arguments to be passed to the policy on creation
+    :param verbose: Verbosity level: 0 for no output, 1 for info messages, 2 for debug messages
+    :param seed: Seed for the pseudo random generators
+    :param device: Device (cpu, cuda, ...) on which the code should be run
+    :param _init_setup_model: Whether or not to build the network at the creation of the instance
+    """
+
+    policy_aliases: ClassVar[dict[str, type[BasePolicy]]] = {
+        "MlpPolicy": MlpPolicy,
+        "CnnPolicy": CnnPolicy,
+    }
+    policy: ACERPolicy
+    replay_buffer: SegmentReplayBuffer
+
+    def __init__(
+        self,
+        policy: Union[str, type[ACERPolicy]],
+        env: Union[GymEnv, str],
+        learning_rate: Union[float, Schedule] = 7e-4,
+        n_steps: int = 20,
+        gamma: float = 0.99,
+        buffer_size: int = 50_000,
+        replay_ratio: float = 4.0,
+        replay_start: int = 1_000,
+        q_coef: float = 0.5,
+        ent_coef: float = 0.01,
+        max_grad_norm: float = 10.0,
+        c: float = 10.0,
+        trust_region: bool = True,
+        alpha: float = 0.99,
+        delta: float = 1.0,
+        behaviour: Optional[BehaviourPolicy] = None,
+        stats_window_size: int = 100,
+        tensorboard_log: Optional[str] = None,
+        policy_kwargs: Optional[dict[str, Any]] = None,
+        verbose: int = 0,
+        seed: Optional[int] = None,
+        device: Union[th.device, str] = "auto",
+        _init_setup_model: bool = True,
+    ) -> None:
+        super().__init__(
+            policy,
+            env,
+            learning_rate=learning_rate,
+            policy_kwargs=policy_kwargs,
+            stats_window_size=stats_window_size,
+            tensorboard_log=tensorboard_log,
+            verbose=verbose,
+            device=device,
+            support_multi_env=True,
+            seed=seed,
+            supported_action_spaces=(spaces.Discrete,),
+        )
+        self.n_steps = n_steps
+        self.gamma = gamma
+        self.buffer_size = buffer_size
+        self.replay_ratio = replay_ratio
+        self.replay_start = replay_start
+        self.q_coef = q_coef
+        self.ent_coef = ent_coef
+        self.max_grad_norm = max_grad_norm
+        self.c = c
+        self.trust_region = trust_region
+        self.alpha = alpha
+        self.delta = delta
+        self.behaviour = behaviour
+        if _init_setup_model:
+            self._setup_model()
+
+    def _setup_model(self) -> None:
+        if isinstance(self.observation_space, spaces.Dict):
+            raise ValueError("ACER does not support Dict observation spaces")
+        self._setup_lr_schedule()
+        self.set_random_seed(self.seed)
+        self.policy = self.policy_class(  # type: ignore[assignment]
+            self.observation_space, self.action_space, self.lr_schedule, **self.policy_kwargs
+        )
+        self.policy = self.policy.to(self.device)
+        self.replay_buffer = SegmentReplayBuffer(
+            self.buffer_size, self.n_steps, self.n_envs, self.observation_space, int(self.action_space.n)
+        )
+        self._last_infos: list[dict[str, Any]] = [{} for _ in range(self.n_envs)]
+        self.last_rollout_tags: Optional[np.ndarray] = None
+
+    def _excluded_save_params(self) -> list[str]:
+        return [*super()._excluded_save_params(), "behaviour", "_last_infos", "last_rollout_tags"]
+
+    def _get_torch_save_params(self) -> tuple[list[str], list[str]]:
+        return ["policy", "policy.optimizer"], []
+
+    @property
+    def behaviour_policy(self) -> BehaviourPolicy:
+        """The behaviour in use: the one given, or sampling from the current policy."""
+        if self.behaviour is None:
+            self.behaviour = OnPolicyBehaviour()
+        return self.behaviour
+
+    # ------------------------------------------------------------------ rollouts
+
+    def _checked_behaviour_step(self, obs: Any, probs: th.Tensor) -> tuple[np.ndarray, np.ndarray, Optional[np.ndarray]]:
+        """Ask the behaviour for this step's actions and check that mu is a distribution covering them."""
+        step = self.behaviour_policy(obs, probs, self._last_infos, self._last_episode_starts)
+        actions = th.as_tensor(step.actions, device=self.device).long().reshape(-1)
+        mu = th.as_tensor(step.mu, dtype=th.float32, device=self.device)
+        name = type(self.behaviour_policy).__name__
+        if mu.shape != probs.shape or actions.shape[0] != probs.shape[0]:
+            raise ValueError(
+                f"Behaviour {name} returned actions of shape {tuple(actions.shape)} and mu of shape {tuple(mu.shape)}; "
+                f"expected ({probs.shape[0]},) and {tuple(probs.shape)}"
+            )
+        mu_taken = mu.gather(1, actions.unsqueeze(1)).squeeze(1)
+        if not bool((mu_taken > 0).all()):
+            bad = th.nonzero(mu_taken <= 0).flatten().tolist()
+            raise ValueError(
+                f"Behaviour {name} took actions with mu(a_t) = 0 in envs {bad}: importance weights pi/mu would be "
+                "unbounded. Report the distribution the actions were drawn from, with positive mass on the taken "
+                "action (mix a deterministic choice with some mass on every action)."
+            )
+        if bool((mu < 0).any()) or not bool(th.allclose(mu.sum(-1), th.ones_like(mu_taken), atol=1e-4)):
+            raise ValueError(f"Behaviour {name} returned a mu that is not a probability distribution per env")
+        return actions.cpu().numpy(), mu.cpu().numpy(), step.tags
+
+    def _timeout_values(self, dones: np.ndarray, infos: list[dict[str, Any]]) -> np.ndarray:
+        """V of the true last observation where a time limit cut the episode (it is bootstrapped, not terminal)."""
+        values = np.zeros(len(dones), dtype=np.float32)
+        idx = [
+            i
+            for i in np.flatnonzero(dones)
+            if infos[i].get("TimeLimit.truncated", False) and infos[i].get("terminal_observation") is not None
+        ]
+        if idx:
+            terminal = np.stack([infos[i]["terminal_observation"] for i in idx])
+            with th.no_grad():
+                logits, q = self.policy.logits_and_q(obs_as_tensor(terminal, self.device))
+                values[idx] = (th.softmax(logits, -1) * q).sum(-1).cpu().numpy()
+        return values
+
+    def collect_rollouts(self, env: VecEnv, callback: BaseCallback) -> Optional[Segment]:
+        """
+        Collect one segment of ``n_steps`` per env with the behaviour policy.
+
+        :param env: The training environment
+        :param callback: Callback called at each step (and at the beginning and end of the rollout)
+        :return: The segment, or None if the callback stopped training
+        """
+        assert self._last_obs is not None, "No previous observation was provided"
+        self.policy.set_training_mode(False)
+        n_envs, n_actions = env.num_envs, int(self.action_space.n)
+        obs_shape = self.observation_space.shape
+        observations = np.zeros((self.n_steps + 1, n_envs, *obs_shape), dtype=self.observation_space.dtype)
+        actions_buf = np.zeros((self.n_steps, n_envs), dtype=np.int64)
+        rewards_buf = np.zeros((self.n_steps, n_envs), dtype=np.float32)
+        dones_buf = np.zeros((self.n_steps, n_envs), dtype=np.float32)
+        timeout_buf = np.zeros((self.n_steps, n_envs), dtype=np.float32)
+        mu_buf = np.zeros((self.n_steps, n_envs, n_actions), dtype=np.float32)
+        tags_buf: list[Optional[np.ndarray]] = []
+
+        callback.on_rollout_start()
+        for step in range(self.n_steps):
+            observations[step] = self._last_obs
+            with th.no_grad():
+                probs = self.policy.action_probs(obs_as_tensor(self._last_obs, self.device))  # type: ignore[arg-type]
+            actions, mu, tags = self._checked_behaviour_step(self._last_obs, probs)
+
+            new_obs, rewards, dones, infos = env.step(actions)
+            self.num_timesteps += n_envs
+
+            callback.update_locals(locals())
+            if not callback.on_step():
+                return None
+            self._update_info_buffer(infos, dones)
+
+            actions_buf[step] = actions
+            rewards_buf[step] = rewards
+            dones_buf[step] = dones
+            mu_buf[step] = mu
+            tags_buf.append(tags)
+            if dones.any():
+                timeout_buf[step] = self._timeout_values(dones, infos)
+            self._last_obs = new_obs  # type: ignore[assignment]
+            self._last_episode_starts = dones
+            self._last_infos = infos
+
+        observations[self.n_steps] = self._last_obs
+        self.last_rollout_tags = None if any(t is None for t in tags_buf) else np.stack(tags_buf)
+        callback.update_locals(locals())
+        callback.on_rollout_end()
+        return Segment(observations, actions_buf, rewards_buf, dones_buf, timeout_buf, mu_buf)
+
+    # ------------------------------------------------------------------ updates
+
+    def _update(self, segment: Segment) -> dict[str, float]:
+        """One gradient step of ACER on a (T, E) segment batch; returns statistics for logging."""
+        n_steps, n_envs = segment.actions.shape
+        n = n_steps * n_envs
+        obs = th.as_tensor(segment.observations, device=self.device)
+        obs = obs.reshape(n + n_envs, *obs.shape[2:])
+        actions = th.as_tensor(segment.actions, device=self.device).reshape(n)
+        mu = th.as_tensor(segment.mu, device=self.device).reshape(n, -1)
+        rewards = th.as_tensor(segment.rewards, device=self.device)
+        dones = th.as_tensor(segment.dones, device=self.device)
+        timeout_values = th.as_tensor(segment.timeout_values, device=self.device)
+
+        logits, q_all = self.policy.logits_and_q(obs)
+        probs_all = th.softmax(logits, dim=-1)
+        values_all = (probs_all * q_all).sum(-1).detach()
+        probs, q_values, values = probs_all[:n], q_all[:n], values_all[:n]
+        q_taken = q_values.gather(1, actions.unsqueeze(1)).squeeze(1)
+
+        with th.no_grad():
+            rho = probs / (mu + EPS)
+            rho_taken = rho.gather(1, actions.unsqueeze(1)).squeeze(1)
+            q_ret = retrace_targets(
+                rewards + self.gamma * timeout_values,
+                dones,
+                q_taken.detach().view(n_steps, n_envs),
+                values.view(n_steps, n_envs),
+                rho_taken.view(n_steps, n_envs),
+                values_all[n:],
+                self.gamma,
+            ).reshape(n)
+        q_loss = 0.5 * (q_ret - q_taken).pow(2).mean()
+
+        # The policy objective as a function of the probability vector f, where the trust region acts.
+        f = probs.detach().requires_grad_(True)
+        terms = policy_terms(f, actions, q_values.detach(), values, q_ret, rho, self.c)
+        objective = (terms.truncated_is + terms.bias_correction + self.ent_coef * terms.entropy).mean()
+        (g,) = th.autograd.grad(objective * n, f)
+        tr_scale = th.zeros(n, device=self.device)
+        if self.trust_region:
+            average_probs = th.softmax(self.policy.average_logits(obs[:n]), dim=-1)
+            k = -average_probs / (f.detach() + EPS)
+            g, tr_scale = trust_region_project(g, k, self.delta)
+        loss = -(probs * g.detach()).sum() / n + self.q_coef * q_loss
+
+        self.policy.optimizer.zero_grad()
+        loss.backward()
+        grad_norm = th.nn.utils.clip_grad_norm_(self.policy.net.parameters(), self.max_grad_norm)
+        self.policy.optimizer.step()
+        self.policy.update_average(self.alpha)
+        self._n_updates += 1
+        return {
+            "policy_loss": -terms.truncated_is.mean().item(),
+            "bias_correction_loss": -terms.bias_correction.mean().item(),
+            "entropy_loss": -terms.entropy.mean().item(),
+            "value_loss": q_loss.item(),
+            "rho_mean": rho_taken.mean().item(),
+            "rho_truncated_fraction": (rho_taken > self.c).float().mean().item(),
+            "trust_region_active_fraction": (tr_scale > 0).float().mean().item(),
+            "grad_norm": float(grad_norm),
+        }
+
+    def train(self, segment: Segment) -> None:
+        """
+        Store the segment, update on it, then on ``Poisson(replay_ratio)`` segments from the replay buffer.
+
+        :param segment: The segment just collected
+        """
+        self.policy.set_training_mode(True)
+        self._update_learning_rate(self.policy.optimizer)
+        self.replay_buffer.add(segment)
+        stats = self._update(segment)
+        n_replay = 0
+        if self.replay_ratio > 0 and self.replay_buffer.size() >= self.replay_start:
+            n_replay = np.random.poisson(self.replay_ratio)
+            for _ in range(n_replay):
+                self._update(self.replay_buffer.sample())
+        for key, value in stats.items():
+            self.logger.record(f"train/{key}", value)
+        self.logger.record("train/replay_updates", n_replay)
+        self.logger.record("train/n_updates", self._n_updates, exclude="tensorboard")
+
+    def learn(
+        self: SelfACER,
+        total_timesteps: int,
+        callback: MaybeCallback = None,
+        log_interval: int = 100,
+        tb_log_name: str = "ACER",
+        reset_num_timesteps: bool = True,
+        progress_bar: bool = False,
+    ) -> SelfACER:
+        """
+        Return a trained model.
+
+        :param total_timesteps: The total number of env steps to train on
+        :param callback: Callback(s) called at every step with the state of the algorithm
+        :param log_interval: Number of iterations (segments) between log dumps
+        :param tb_log_name: The name of the run for TensorBoard logging
+        :param reset_num_timesteps: Whether or not to reset the current timestep number (used in logging)
+        :param progress_bar: Display a progress bar using tqdm and rich
+        :return: The trained model
+        """
+        iteration = 0
+        total_timesteps, callback = self._setup_learn(total_timesteps, callback, reset_num_timesteps, tb_log_name, progress_bar)
+        if reset_num_timesteps or len(self._last_infos) != self.n_envs:
+            self._last_infos = [{} for _ in range(self.n_envs)]
+        self.behaviour_policy.setup(self)
+        callback.on_training_start(locals(), globals())
+        assert self.env is not None
+
+        while self.num_timesteps < total_timesteps:
+            segment = self.collect_rollouts(self.env, callback)
+            if segment is None:
+                break
+            iteration += 1
+            self._update_current_progress_remaining(self.num_timesteps, total_timesteps)
+            self.behaviour_policy.record(self.logger)
+            self._record_tags()
+            self.train(segment)
+            if log_interval is not None and iteration % log_interval == 0:
+                self.dump_logs(iteration)
+
+        callback.on_training_end()
+        return self
+
+    def _record_tags(self) -> None:
+        if self.last_rollout_tags is None:
+            return
+        labels, counts = np.unique(self.last_rollout_tags.astype(str), return_counts=True)
+        for label, count in zip(labels, counts):
+            self.logger.record(f"behaviour/{label}", count / self.last_rollout_tags.size)
+
+    def dump_logs(self, iteration: int = 0) -> None:
+        """
+        Write the log: ``rollout/`` (episode return, length, success rate), ``time/`` and the last ``train/``.
+
+        :param iteration: Current logging iteration
+        """
+        OnPolicyAlgorithm.dump_logs(self, iteration)  # type: ignore[arg-type]
+
+    # ------------------------------------------------------------------ replay buffer I/O
+
+    def save_replay_buffer(self, path: Union[str, pathlib.Path, io.BufferedIOBase]) -> None:
+        """
+        Save the replay buffer as a pickle file.
+
+        :param path: Path to the file where the replay buffer should be saved
+        """
+        save_to_pkl(path, self.replay_buffer, self.verbose)
+
+    def load_replay_buffer(self, path: Union[str, pathlib.Path, io.BufferedIOBase]) -> None:
+        """
+        Load a replay buffer from a pickle file.
+
+        :param path: Path to the pickled replay buffer
+        """
+        buffer = load_from_pkl(path, self.verbose)
+        if not isinstance(buffer, SegmentReplayBuffer):
+            raise ValueError(f"{path} does not hold an ACER segment replay buffer")
+        expected = (self.n_steps, self.n_envs, int(self.action_space.n))
+        if (buffer.n_steps, buffer.n_envs, buffer.n_actions) != expected:
+            raise ValueError(
+                f"The replay buffer holds segments of (n_steps, n_envs, n_actions) = "
+                f"{(buffer.n_steps, buffer.n_envs, buffer.n_actions)}, the model expects {expected}"
+            )
+        self.replay_buffer = buffer
+

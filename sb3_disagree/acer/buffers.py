@@ -1,0 +1,118 @@
+"""Segment storage for ACER: one rollout of ``n_steps`` per env, with the full behaviour distribution mu."""
+
+from dataclasses import dataclass
+from typing import Optional
+
+import numpy as np
+from gymnasium import spaces
+
+
+@dataclass
+class Segment:
+    """
+    A batch of segments, time-major. ``observations`` has one more step than the rest: its last row is
+    the observation after the segment, where the Retrace recursion bootstraps.
+
+    :param observations: x_0 .. x_T, shape (T + 1, E, *obs_shape)
+    :param actions: a_t, shape (T, E)
+    :param rewards: r_t, shape (T, E)
+    :param dones: 1.0 where the episode ended at step t (terminated or truncated), shape (T, E)
+    :param timeout_values: V(x_{t+1}) of the true last observation where a time limit truncated the
+        episode at step t, else 0; shape (T, E)
+    :param mu: Behaviour distribution at each step, shape (T, E, A)
+    """
+
+    observations: np.ndarray
+    actions: np.ndarray
+    rewards: np.ndarray
+    dones: np.ndarray
+    timeout_values: np.ndarray
+    mu: np.ndarray
+
+    @property
+    def n_steps(self) -> int:
+        return self.actions.shape[0]
+
+
+class SegmentReplayBuffer:
+    """
+    Circular buffer of whole segments. A sample takes one random stored segment per environment, so a
+    replay batch has the shape of an on-policy batch (as in the reference implementation).
+
+    :param buffer_size: Capacity in env transitions, over all envs (SB3's convention); rounded down to
+        whole segments, at least one
+    :param n_steps: Length of a segment
+    :param n_envs: Number of parallel environments
+    :param observation_space: Observation space
+    :param n_actions: Number of discrete actions
+    """
+
+    def __init__(
+        self,
+        buffer_size: int,
+        n_steps: int,
+        n_envs: int,
+        observation_space: spaces.Space,
+        n_actions: int,
+    ) -> None:
+        self.n_steps = n_steps
+        self.n_envs = n_envs
+        self.n_actions = n_actions
+        self.n_segments = max(1, buffer_size // (n_steps * n_envs))
+        obs_shape = observation_space.shape if observation_space.shape is not None else ()
+        s, t, e = self.n_segments, n_steps, n_envs
+        self.observations = np.zeros((s, t + 1, e, *obs_shape), dtype=observation_space.dtype)
+        self.actions = np.zeros((s, t, e), dtype=np.int64)
+        self.rewards = np.zeros((s, t, e), dtype=np.float32)
+        self.dones = np.zeros((s, t, e), dtype=np.float32)
+        self.timeout_values = np.zeros((s, t, e), dtype=np.float32)
+        self.mu = np.zeros((s, t, e, n_actions), dtype=np.float32)
+        self.pos = 0
+        self.full = False
+
+    @property
+    def n_stored(self) -> int:
+        """Number of segments stored."""
+        return self.n_segments if self.full else self.pos
+
+    def size(self) -> int:
+        """Number of env transitions stored, over all envs."""
+        return self.n_stored * self.n_steps * self.n_envs
+
+    def add(self, segment: Segment) -> None:
+        """
+        Store a segment batch (copied), overwriting the oldest when full.
+
+        :param segment: Segments of shape (T, E, ...) matching this buffer
+        """
+        i = self.pos
+        self.observations[i] = segment.observations
+        self.actions[i] = segment.actions
+        self.rewards[i] = segment.rewards
+        self.dones[i] = segment.dones
+        self.timeout_values[i] = segment.timeout_values
+        self.mu[i] = segment.mu
+        self.pos = (self.pos + 1) % self.n_segments
+        self.full = self.full or self.pos == 0
+
+    def sample(self, rng: Optional[np.random.Generator] = None) -> Segment:
+        """
+        :param rng: Random generator; numpy's global one if None
+        :return: One random stored segment for each environment, stacked as a (T, E, ...) batch
+        """
+        if self.n_stored == 0:
+            raise ValueError("The replay buffer is empty")
+        if rng is None:
+            seg = np.random.randint(0, self.n_stored, size=self.n_envs)
+        else:
+            seg = rng.integers(0, self.n_stored, size=self.n_envs)
+        env = np.arange(self.n_envs)
+        # Advanced indexing over (segment, env) pairs puts that axis first: move it back behind time.
+        return Segment(
+            observations=np.moveaxis(self.observations[seg, :, env], 0, 1),
+            actions=self.actions[seg, :, env].T,
+            rewards=self.rewards[seg, :, env].T,
+            dones=self.dones[seg, :, env].T,
+            timeout_values=self.timeout_values[seg, :, env].T,
+            mu=np.moveaxis(self.mu[seg, :, env], 0, 1),
+        )

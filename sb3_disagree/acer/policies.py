@@ -1,0 +1,199 @@
+"""ACER policies: a shared trunk with a policy head and a Q head, plus the average policy network."""
+
+import copy
+from functools import partial
+from typing import Any, Optional
+
+import numpy as np
+import torch as th
+from gymnasium import spaces
+from stable_baselines3.common.distributions import CategoricalDistribution
+from stable_baselines3.common.policies import BasePolicy
+from stable_baselines3.common.sb2_compat.rmsprop_tf_like import RMSpropTFLike
+from stable_baselines3.common.torch_layers import BaseFeaturesExtractor, FlattenExtractor, NatureCNN
+from stable_baselines3.common.type_aliases import PyTorchObs, Schedule
+from stable_baselines3.common.utils import polyak_update
+from torch import nn
+
+
+class ACERNetwork(nn.Module):
+    """
+    Features extractor and MLP trunk shared by two linear heads: policy logits and Q(s, .).
+
+    :param features_extractor: Network that maps preprocessed observations to features
+    :param net_arch: Sizes of the hidden layers of the trunk after the features extractor
+    :param activation_fn: Activation between the trunk's layers
+    :param n_actions: Number of discrete actions
+    """
+
+    def __init__(
+        self,
+        features_extractor: BaseFeaturesExtractor,
+        net_arch: list[int],
+        activation_fn: type[nn.Module],
+        n_actions: int,
+    ) -> None:
+        super().__init__()
+        self.features_extractor = features_extractor
+        layers: list[nn.Module] = []
+        last = features_extractor.features_dim
+        for size in net_arch:
+            layers += [nn.Linear(last, size), activation_fn()]
+            last = size
+        self.trunk = nn.Sequential(*layers)
+        self.action_net = nn.Linear(last, n_actions)
+        self.q_net = nn.Linear(last, n_actions)
+
+    def forward(self, features: th.Tensor) -> tuple[th.Tensor, th.Tensor]:
+        latent = self.trunk(features)
+        return self.action_net(latent), self.q_net(latent)
+
+    def logits(self, features: th.Tensor) -> th.Tensor:
+        return self.action_net(self.trunk(features))
+
+
+class ACERPolicy(BasePolicy):
+    """
+    Policy for ACER with discrete actions. There is no V head: ``V(s) = sum_a pi(a|s) Q(s, a)``.
+
+    The average policy network (``average_net``) lives inside the policy, so that ``save``/``load``
+    and ``get_parameters`` carry it; it is excluded from the optimizer and moves only by
+    :meth:`update_average`.
+
+    :param observation_space: Observation space
+    :param action_space: Action space (``Discrete``)
+    :param lr_schedule: Learning rate schedule (could be constant)
+    :param net_arch: Hidden layer sizes of the shared trunk; default ``[64, 64]`` for MLP features
+        and ``[]`` for NatureCNN (its 512 features feed the heads directly)
+    :param activation_fn: Activation function of the trunk
+    :param ortho_init: Whether to use orthogonal initialization (as SB3's actor-critic policies)
+    :param features_extractor_class: Features extractor to use
+    :param features_extractor_kwargs: Keyword arguments to pass to the features extractor
+    :param normalize_images: Whether to divide images by 255
+    :param optimizer_class: The optimizer; RMSprop with TensorFlow semantics by default, as in the reference
+    :param optimizer_kwargs: Additional keyword arguments, excluding the learning rate, to pass to the optimizer
+    """
+
+    def __init__(
+        self,
+        observation_space: spaces.Space,
+        action_space: spaces.Discrete,
+        lr_schedule: Schedule,
+        net_arch: Optional[list[int]] = None,
+        activation_fn: type[nn.Module] = nn.Tanh,
+        ortho_init: bool = True,
+        features_extractor_class: type[BaseFeaturesExtractor] = FlattenExtractor,
+        features_extractor_kwargs: Optional[dict[str, Any]] = None,
+        normalize_images: bool = True,
+        optimizer_class: type[th.optim.Optimizer] = RMSpropTFLike,
+        optimizer_kwargs: Optional[dict[str, Any]] = None,
+    ) -> None:
+        if optimizer_kwargs is None:
+            optimizer_kwargs = {}
+            if optimizer_class is RMSpropTFLike:
+                optimizer_kwargs = dict(alpha=0.99, eps=1e-5, weight_decay=0)
+        super().__init__(
+            observation_space,
+            action_space,
+            features_extractor_class,
+            features_extractor_kwargs,
+            normalize_images=normalize_images,
+            optimizer_class=optimizer_class,
+            optimizer_kwargs=optimizer_kwargs,
+        )
+        if not isinstance(action_space, spaces.Discrete):
+            raise ValueError(f"ACER supports Discrete action spaces only, got {action_space}")
+        if net_arch is None:
+            net_arch = [] if issubclass(features_extractor_class, NatureCNN) else [64, 64]
+        self.net_arch = list(net_arch)
+        self.activation_fn = activation_fn
+        self.ortho_init = ortho_init
+        self.n_actions = int(action_space.n)
+        self.action_dist = CategoricalDistribution(self.n_actions)
+        self._build(lr_schedule)
+
+    def _build(self, lr_schedule: Schedule) -> None:
+        self.net = ACERNetwork(self.make_features_extractor(), self.net_arch, self.activation_fn, self.n_actions)
+        if self.ortho_init:
+            # Same gains as SB3's ActorCriticPolicy: small policy logits give a near-uniform first policy.
+            gains = {self.net.features_extractor: np.sqrt(2), self.net.trunk: np.sqrt(2), self.net.action_net: 0.01,
+                     self.net.q_net: 1.0}
+            for module, gain in gains.items():
+                module.apply(partial(self.init_weights, gain=gain))
+        self.average_net = copy.deepcopy(self.net)
+        self.average_net.requires_grad_(False)
+        self.optimizer = self.optimizer_class(self.net.parameters(), lr=lr_schedule(1), **self.optimizer_kwargs)
+
+    def _get_constructor_parameters(self) -> dict[str, Any]:
+        data = super()._get_constructor_parameters()
+        data.update(
+            dict(
+                net_arch=self.net_arch,
+                activation_fn=self.activation_fn,
+                ortho_init=self.ortho_init,
+                lr_schedule=self._dummy_schedule,
+                features_extractor_class=self.features_extractor_class,
+                features_extractor_kwargs=self.features_extractor_kwargs,
+                optimizer_class=self.optimizer_class,
+                optimizer_kwargs=self.optimizer_kwargs,
+            )
+        )
+        return data
+
+    def logits_and_q(self, obs: PyTorchObs) -> tuple[th.Tensor, th.Tensor]:
+        """
+        :param obs: Observations, as tensors
+        :return: Policy logits and Q-values, both of shape (batch, n_actions)
+        """
+        return self.net(self.extract_features(obs, self.net.features_extractor))
+
+    def average_logits(self, obs: PyTorchObs) -> th.Tensor:
+        """
+        :param obs: Observations, as tensors
+        :return: Logits of the average policy network (no gradient)
+        """
+        with th.no_grad():
+            return self.average_net.logits(self.extract_features(obs, self.average_net.features_extractor))
+
+    def action_probs(self, obs: PyTorchObs) -> th.Tensor:
+        """
+        :param obs: Observations, as tensors
+        :return: Action probabilities pi(.|s) of the current policy, shape (batch, n_actions)
+        """
+        logits = self.net.logits(self.extract_features(obs, self.net.features_extractor))
+        return th.softmax(logits, dim=-1)
+
+    def get_distribution(self, obs: PyTorchObs) -> CategoricalDistribution:
+        """
+        The current policy's action distribution, as SB3's actor-critic policies expose it.
+
+        :param obs: Observations, as tensors
+        :return: A categorical distribution over actions
+        """
+        logits = self.net.logits(self.extract_features(obs, self.net.features_extractor))
+        return self.action_dist.proba_distribution(action_logits=logits)
+
+    def forward(self, obs: th.Tensor, deterministic: bool = False) -> th.Tensor:
+        return self.get_distribution(obs).get_actions(deterministic=deterministic)
+
+    def _predict(self, observation: PyTorchObs, deterministic: bool = False) -> th.Tensor:
+        return self.get_distribution(observation).get_actions(deterministic=deterministic)
+
+    def update_average(self, alpha: float) -> None:
+        """
+        Move the average network toward the current one: ``theta_avg <- alpha * theta_avg + (1 - alpha) * theta``.
+
+        :param alpha: Decay of the average network (0.99 in the reference)
+        """
+        polyak_update(self.net.parameters(), self.average_net.parameters(), 1.0 - alpha)
+
+
+MlpPolicy = ACERPolicy
+
+
+class CnnPolicy(ACERPolicy):
+    """ACERPolicy with the NatureCNN features extractor, for image observations."""
+
+    def __init__(self, *args: Any, features_extractor_class: type[BaseFeaturesExtractor] = NatureCNN, **kwargs: Any) -> None:
+        kwargs.setdefault("activation_fn", nn.ReLU)
+        super().__init__(*args, features_extractor_class=features_extractor_class, **kwargs)

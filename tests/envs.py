@@ -1,0 +1,53 @@
+"""Tiny environments for the tests."""
+
+import gymnasium as gym
+import numpy as np
+from gymnasium import spaces
+
+
+class ChainEnv(gym.Env):
+    """
+    A line of `length` cells; action 1 moves right, action 0 left (a third action stays). Reaching the right
+    end gives +1 and terminates. Observation: one-hot position.
+    """
+
+    def __init__(self, length: int = 5, n_actions: int = 2) -> None:
+        self.length = length
+        self.observation_space = spaces.Box(0.0, 1.0, (length,), dtype=np.float32)
+        self.action_space = spaces.Discrete(n_actions)
+        self.pos = 0
+
+    def _obs(self) -> np.ndarray:
+        obs = np.zeros(self.length, dtype=np.float32)
+        obs[self.pos] = 1.0
+        return obs
+
+    def reset(self, *, seed=None, options=None):
+        super().reset(seed=seed)
+        self.pos = 0
+        return self._obs(), {}
+
+    def step(self, action):
+        self.pos = int(np.clip(self.pos + {0: -1, 1: 1}.get(int(action), 0), 0, self.length - 1))
+        terminated = self.pos == self.length - 1
+        return self._obs(), float(terminated), terminated, False, {"is_success": terminated}
+
+
+class ImageEnv(gym.Env):
+    """A 40x40 RGB observation whose brightness says which of 3 actions pays; one-step episodes."""
+
+    def __init__(self) -> None:
+        self.observation_space = spaces.Box(0, 255, (40, 40, 3), dtype=np.uint8)
+        self.action_space = spaces.Discrete(3)
+        self.target = 0
+
+    def _obs(self) -> np.ndarray:
+        return np.full((40, 40, 3), 60 * (self.target + 1), dtype=np.uint8)
+
+    def reset(self, *, seed=None, options=None):
+        super().reset(seed=seed)
+        self.target = int(self.np_random.integers(3))
+        return self._obs(), {}
+
+    def step(self, action):
+        return self._obs(), float(int(action) == self.target), True, False, {}

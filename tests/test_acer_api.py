@@ -1,0 +1,110 @@
+"""ACER in the SB3 API: save/load, replay buffer I/O, images, callbacks, logging, learning."""
+
+import numpy as np
+import pytest
+import torch as th
+from envs import ChainEnv, ImageEnv
+from stable_baselines3.common.callbacks import BaseCallback
+from stable_baselines3.common.env_util import make_vec_env
+from stable_baselines3.common.evaluation import evaluate_policy
+from stable_baselines3.common.logger import configure
+from stable_baselines3.common.vec_env import VecTransposeImage
+
+from sb3_disagree import ACER
+
+HYPER = dict(n_steps=7, gamma=0.95, buffer_size=700, replay_ratio=2.5, replay_start=14, q_coef=0.3, ent_coef=0.02,
+             max_grad_norm=3.0, c=5.0, trust_region=False, alpha=0.95, delta=0.5)
+
+
+def test_save_load_gives_same_actions_and_hyperparameters(tmp_path):
+    env = make_vec_env(ChainEnv, n_envs=2, seed=0)
+    model = ACER("MlpPolicy", env, seed=0, policy_kwargs=dict(net_arch=[16]), **HYPER)
+    model.learn(300)
+    model.save(tmp_path / "model.zip")
+    loaded = ACER.load(tmp_path / "model.zip")
+    for key, value in HYPER.items():
+        assert getattr(loaded, key) == value, key
+    assert loaded.policy.net_arch == [16] and loaded.num_timesteps == model.num_timesteps
+    obs = np.eye(5, dtype=np.float32)
+    assert np.array_equal(model.predict(obs, deterministic=True)[0], loaded.predict(obs, deterministic=True)[0])
+    with th.no_grad():
+        obs_t = th.as_tensor(obs)
+        assert th.allclose(model.policy.action_probs(obs_t), loaded.policy.action_probs(obs_t))
+        assert th.allclose(model.policy.average_logits(obs_t), loaded.policy.average_logits(obs_t))
+    assert not th.allclose(loaded.policy.average_logits(obs_t), loaded.policy.net.logits(obs_t))
+    params = loaded.get_parameters()
+    assert {"policy", "policy.optimizer"} <= set(params)
+    assert any(k.startswith("average_net.") for k in params["policy"])
+
+
+def test_replay_buffer_round_trip_and_continued_learning(tmp_path):
+    env = make_vec_env(ChainEnv, n_envs=2, seed=0)
+    model = ACER("MlpPolicy", env, n_steps=5, seed=0)
+    model.learn(100)
+    model.save_replay_buffer(tmp_path / "buffer.pkl")
+    model.save(tmp_path / "model.zip")
+    loaded = ACER.load(tmp_path / "model.zip", env=env)
+    loaded.load_replay_buffer(tmp_path / "buffer.pkl")
+    assert loaded.replay_buffer.n_stored == model.replay_buffer.n_stored == 10
+    assert np.array_equal(loaded.replay_buffer.mu, model.replay_buffer.mu)
+    loaded.learn(50, reset_num_timesteps=False)
+    assert loaded.num_timesteps == 150 and loaded.replay_buffer.n_stored == 15
+
+
+def test_load_replay_buffer_rejects_a_mismatched_buffer(tmp_path):
+    a = ACER("MlpPolicy", make_vec_env(ChainEnv, n_envs=2), n_steps=5)
+    a.learn(20)
+    a.save_replay_buffer(tmp_path / "buffer.pkl")
+    b = ACER("MlpPolicy", make_vec_env(ChainEnv, n_envs=3), n_steps=5)
+    with pytest.raises(ValueError, match="n_envs"):
+        b.load_replay_buffer(tmp_path / "buffer.pkl")
+
+
+def test_cnn_policy_wraps_images_and_learns_the_colour_task():
+    env = make_vec_env(ImageEnv, n_envs=4, seed=0)
+    model = ACER("CnnPolicy", env, n_steps=5, seed=0, replay_start=100, learning_rate=1e-3)
+    assert isinstance(model.get_env(), VecTransposeImage)
+    assert model.policy.net.features_extractor.__class__.__name__ == "NatureCNN"
+    model.learn(6_000)
+    mean, _ = evaluate_policy(model, make_vec_env(ImageEnv, n_envs=1, seed=1), n_eval_episodes=30)
+    assert mean >= 0.9
+
+
+def test_set_env_predict_and_callbacks_and_logger(tmp_path):
+    model = ACER("MlpPolicy", make_vec_env(ChainEnv, n_envs=2, seed=0), n_steps=5, seed=0)
+    model.set_logger(configure(str(tmp_path), ["csv"]))
+    events = []
+
+    class Record(BaseCallback):
+        def _on_rollout_start(self):
+            events.append("start")
+
+        def _on_step(self):
+            events.append("step")
+            return self.num_timesteps < 40  # stops training after 20 vectorised steps
+
+    model.learn(1_000, callback=Record(), log_interval=1)
+    assert events.count("start") == 4 and events.count("step") == 20 and model.num_timesteps == 40
+    model.set_env(make_vec_env(ChainEnv, n_envs=2, seed=1))
+    model.learn(20, log_interval=1)
+    header = (tmp_path / "progress.csv").read_text().splitlines()[0].split(",")
+    for key in ["train/policy_loss", "train/value_loss", "train/entropy_loss", "train/bias_correction_loss",
+                "rollout/ep_rew_mean", "time/fps", "train/trust_region_active_fraction"]:
+        assert key in header, key
+    action, _ = model.predict(np.eye(5, dtype=np.float32)[0])
+    assert action.shape == () and 0 <= int(action) < 2
+
+
+def test_rejects_continuous_actions():
+    with pytest.raises(AssertionError, match="Discrete"):
+        ACER("MlpPolicy", "Pendulum-v1")
+
+
+def test_learns_the_chain_with_a_fixed_seed():
+    """A tiny learning test: the deterministic policy walks right to the goal of a 6-cell chain."""
+    env = make_vec_env(lambda: ChainEnv(length=6, n_actions=3), n_envs=4, seed=3)
+    model = ACER("MlpPolicy", env, n_steps=10, seed=3, replay_start=200, gamma=0.9)
+    model.learn(6_000)
+    eval_env = make_vec_env(lambda: __import__("gymnasium").wrappers.TimeLimit(ChainEnv(6, 3), 20), n_envs=1)
+    mean, _ = evaluate_policy(model, eval_env, n_eval_episodes=5, deterministic=True)
+    assert mean == 1.0

@@ -1,0 +1,150 @@
+"""ACER's buffer, average network, behaviour checks and time-limit bootstrap."""
+
+import gymnasium as gym
+import numpy as np
+import pytest
+import torch as th
+from envs import ChainEnv
+from gymnasium import spaces
+from stable_baselines3.common.env_util import make_vec_env
+
+from sb3_disagree import ACER, BehaviourPolicy, BehaviourStep
+from sb3_disagree.acer.buffers import Segment, SegmentReplayBuffer
+
+
+def _segment(T, E, A, value):
+    return Segment(
+        observations=np.full((T + 1, E, 3), value, dtype=np.float32),
+        actions=np.full((T, E), value, dtype=np.int64),
+        rewards=np.full((T, E), value, dtype=np.float32),
+        dones=np.zeros((T, E), dtype=np.float32),
+        timeout_values=np.full((T, E), value, dtype=np.float32),
+        mu=np.full((T, E, A), value, dtype=np.float32),
+    )
+
+
+def test_buffer_returns_whole_segments_with_their_mu():
+    T, E, A = 4, 3, 2
+    buf = SegmentReplayBuffer(buffer_size=T * E * 5, n_steps=T, n_envs=E,
+                              observation_space=spaces.Box(-1, 1, (3,)), n_actions=A)
+    assert buf.n_segments == 5
+    for value in range(7):  # wraps around: segments 2..6 remain
+        buf.add(_segment(T, E, A, value))
+    assert buf.full and buf.size() == 5 * T * E
+    rng = np.random.default_rng(0)
+    seen = set()
+    for _ in range(50):
+        s = buf.sample(rng)
+        assert s.observations.shape == (T + 1, E, 3) and s.mu.shape == (T, E, A) and s.actions.shape == (T, E)
+        for e in range(E):
+            v = s.actions[0, e]  # every field of env e's column comes from the same stored segment
+            assert 2 <= v <= 6
+            assert (s.actions[:, e] == v).all() and (s.observations[:, e] == v).all()
+            assert (s.mu[:, e] == v).all() and (s.rewards[:, e] == v).all() and (s.timeout_values[:, e] == v).all()
+            seen.add(int(v))
+    assert seen == {2, 3, 4, 5, 6}
+
+
+def test_buffer_keeps_env_columns_apart():
+    T, E, A = 2, 2, 3
+    buf = SegmentReplayBuffer(T * E, T, E, spaces.Box(-1, 1, (3,)), A)
+    seg = _segment(T, E, A, 0)
+    seg.actions[:, 1] = 2
+    seg.mu[:, 1] = [0.2, 0.3, 0.5]
+    buf.add(seg)
+    s = buf.sample()
+    assert (s.actions[:, 0] == 0).all() and (s.actions[:, 1] == 2).all()
+    assert np.allclose(s.mu[:, 1], [0.2, 0.3, 0.5])
+
+
+def test_average_network_moves_by_one_minus_alpha():
+    model = ACER("MlpPolicy", make_vec_env(ChainEnv, n_envs=2, seed=0), n_steps=5, alpha=0.9, seed=0)
+    policy = model.policy
+    with th.no_grad():
+        for p in policy.average_net.parameters():
+            p.add_(th.randn_like(p))
+    before_avg = [p.detach().clone() for p in policy.average_net.parameters()]
+    before_net = [p.detach().clone() for p in policy.net.parameters()]
+    policy.update_average(0.9)
+    for avg, old_avg, net in zip(policy.average_net.parameters(), before_avg, before_net):
+        assert th.allclose(avg, 0.9 * old_avg + 0.1 * net, atol=1e-6)
+    # ... and an ACER update moves it exactly so, toward the parameters after the optimizer step.
+    before_avg = [p.detach().clone() for p in policy.average_net.parameters()]
+    model.learn(10)
+    for avg, old_avg, net in zip(policy.average_net.parameters(), before_avg, policy.net.parameters()):
+        assert th.allclose(avg, 0.9 * old_avg + 0.1 * net, atol=1e-6)
+    assert not all(th.equal(a, b) for a, b in zip(policy.average_net.parameters(), before_avg))
+    # The average network is never trained by the optimizer.
+    opt_params = {id(p) for group in policy.optimizer.param_groups for p in group["params"]}
+    assert not opt_params & {id(p) for p in policy.average_net.parameters()}
+
+
+class FixedAction(BehaviourPolicy):
+    """Always takes `action`; reports `mu` as given."""
+
+    def __init__(self, action, mu, tags=None):
+        self.action, self.mu, self.tags = action, np.asarray(mu, dtype=np.float32), tags
+
+    def __call__(self, observations, probs, infos, episode_starts):
+        n = probs.shape[0]
+        tags = None if self.tags is None else np.array([self.tags] * n)
+        return BehaviourStep(np.full(n, self.action), np.tile(self.mu, (n, 1)), tags)
+
+
+def test_behaviour_with_zero_mass_on_taken_action_is_rejected():
+    model = ACER("MlpPolicy", make_vec_env(ChainEnv, n_envs=2, seed=0), n_steps=4,
+                 behaviour=FixedAction(0, [0.0, 1.0]))
+    with pytest.raises(ValueError, match=r"mu\(a_t\) = 0"):
+        model.learn(8)
+
+
+def test_behaviour_mu_must_be_a_distribution():
+    model = ACER("MlpPolicy", make_vec_env(ChainEnv, n_envs=2, seed=0), n_steps=4,
+                 behaviour=FixedAction(1, [0.5, 0.9]))
+    with pytest.raises(ValueError, match="probability distribution"):
+        model.learn(8)
+
+
+def test_behaviour_actions_mu_and_tags_reach_the_buffer():
+    model = ACER("MlpPolicy", make_vec_env(ChainEnv, n_envs=3, seed=0), n_steps=4, replay_ratio=0,
+                 behaviour=FixedAction(1, [0.25, 0.75], tags="prior"))
+    model.learn(12)
+    buf = model.replay_buffer
+    assert buf.n_stored == 1
+    assert (buf.actions[0] == 1).all()
+    assert np.allclose(buf.mu[0], [0.25, 0.75])
+    assert model.last_rollout_tags.shape == (4, 3) and (model.last_rollout_tags == "prior").all()
+
+
+def test_default_behaviour_stores_mu_equal_to_pi():
+    model = ACER("MlpPolicy", make_vec_env(ChainEnv, n_envs=2, seed=0), n_steps=3, replay_ratio=0, learning_rate=0.0)
+    model.learn(6)
+    obs = model.replay_buffer.observations[0, :3].reshape(6, -1)
+    with th.no_grad():
+        pi = model.policy.action_probs(th.as_tensor(obs)).numpy()
+    assert np.allclose(model.replay_buffer.mu[0].reshape(6, -1), pi, atol=1e-6)
+
+
+def test_time_limit_truncation_is_bootstrapped_and_termination_is_not():
+    # ChainEnv(length=3) terminates after two steps right; a time limit of 1 truncates first otherwise.
+    def make(limit):
+        return gym.wrappers.TimeLimit(ChainEnv(length=3), max_episode_steps=limit)
+
+    model = ACER("MlpPolicy", make_vec_env(lambda: make(1), n_envs=1), n_steps=4, replay_ratio=0, learning_rate=0.0,
+                 behaviour=FixedAction(1, [0.5, 0.5]))
+    model.learn(4)
+    buf = model.replay_buffer
+    assert (buf.dones[0] == 1).all()  # every step was cut by the time limit
+    obs_after_one_right = th.tensor([[0.0, 1.0, 0.0]])
+    with th.no_grad():
+        logits, q = model.policy.logits_and_q(obs_after_one_right)
+        v = (th.softmax(logits, -1) * q).sum().item()
+    # V(x) of the true last observation (one step right), not of the reset observation that replaced it.
+    assert v != 0 and np.allclose(buf.timeout_values[0], v, atol=1e-6)
+
+    model = ACER("MlpPolicy", make_vec_env(lambda: make(50), n_envs=1), n_steps=4, replay_ratio=0,
+                 behaviour=FixedAction(1, [0.5, 0.5]))
+    model.learn(4)
+    buf = model.replay_buffer
+    assert buf.dones[0, :, 0].tolist() == [0, 1, 0, 1]  # terminations at the right end
+    assert (buf.timeout_values[0] == 0).all()
