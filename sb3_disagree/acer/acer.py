@@ -166,15 +166,16 @@ class ACER(BaseAlgorithm):
                 f"expected ({probs.shape[0]},) and {tuple(probs.shape)}"
             )
         mu_taken = mu.gather(1, actions.unsqueeze(1)).squeeze(1)
-        if not bool((mu_taken > 0).all()):
+        not_distribution = (mu.amin(-1) < 0) | ((mu.sum(-1) - 1.0).abs() > 1e-4)
+        if bool((not_distribution | (mu_taken <= 0)).any()):  # one check on the hot path, details when it fails
+            if bool(not_distribution.any()):
+                raise ValueError(f"Behaviour {name} returned a mu that is not a probability distribution per env")
             bad = th.nonzero(mu_taken <= 0).flatten().tolist()
             raise ValueError(
                 f"Behaviour {name} took actions with mu(a_t) = 0 in envs {bad}: importance weights pi/mu would be "
                 "unbounded. Report the distribution the actions were drawn from, with positive mass on the taken "
                 "action (mix a deterministic choice with some mass on every action)."
             )
-        if bool((mu < 0).any()) or not bool(th.allclose(mu.sum(-1), th.ones_like(mu_taken), atol=1e-4)):
-            raise ValueError(f"Behaviour {name} returned a mu that is not a probability distribution per env")
         return actions.cpu().numpy(), mu.cpu().numpy(), step.tags
 
     def _timeout_values(self, dones: np.ndarray, infos: list[dict[str, Any]]) -> np.ndarray:

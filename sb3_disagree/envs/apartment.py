@@ -1,0 +1,177 @@
+"""
+The apartment of the paper's first experiment: a bedroom, a kitchen and a bathroom off a corridor,
+coloured boxes as objects, the agent starting at a random pose in the corridor.
+
+``obs="rgb"`` renders the egocentric view with MiniWorld (60x80 by default); ``obs="state"`` returns
+position and heading and renders nothing. Both move the agent with :mod:`sb3_disagree.envs.layout`,
+so their dynamics and rewards are identical.
+"""
+
+import math
+from typing import Any, Optional
+
+import gymnasium as gym
+import numpy as np
+from gymnasium import spaces
+
+from sb3_disagree.envs.layout import CORRIDOR, Layout, default_layout
+
+TURN_LEFT, TURN_RIGHT, MOVE_FORWARD = 0, 1, 2
+ACTION_NAMES = ("turn_left", "turn_right", "move_forward")
+
+
+class ApartmentEnv(gym.Env):
+    """
+    Navigate from a random pose in the corridor to one goal object.
+
+    Reward per step: the decrease of the Euclidean distance to the goal object, minus ``step_penalty``;
+    ``success_reward`` and termination once the agent is within reach of the goal (MiniWorld's
+    ``near``: bounding circles plus 1.1 forward steps); truncation after ``max_episode_steps``.
+
+    :param goal: Name of the goal object (shower, bathtub, toilet, bed, wardrobe, nightstand, stove,
+        toaster, microwave, table)
+    :param obs: "rgb" for the egocentric render (uint8, HWC), "state" for ``(x/8, z/8, cos t, sin t)``
+    :param obs_width: Width of the RGB observation
+    :param obs_height: Height of the RGB observation
+    :param max_episode_steps: Steps before truncation
+    :param forward_step: Distance of one move_forward, in metres
+    :param turn_step: Angle of one turn, in degrees
+    :param step_penalty: Subtracted from the reward every step
+    :param success_reward: Added on reaching the goal
+    :param render_mode: "rgb_array" makes ``render()`` return the top-down map with the episode's path
+    :param layout: The apartment; the paper's by default
+    """
+
+    metadata = {"render_modes": ["rgb_array"], "render_fps": 10}
+
+    def __init__(
+        self,
+        goal: str = "bathtub",
+        obs: str = "rgb",
+        obs_width: int = 80,
+        obs_height: int = 60,
+        max_episode_steps: int = 500,
+        forward_step: float = 0.25,
+        turn_step: float = 30.0,
+        step_penalty: float = 0.01,
+        success_reward: float = 10.0,
+        render_mode: Optional[str] = None,
+        layout: Optional[Layout] = None,
+    ) -> None:
+        self.layout = layout or default_layout()
+        self.goal = self.layout.object(goal)
+        if obs not in ("rgb", "state"):
+            raise ValueError(f"obs must be 'rgb' or 'state', got {obs!r}")
+        if render_mode not in (None, "rgb_array"):
+            raise ValueError(f"render_mode must be None or 'rgb_array', got {render_mode!r}")
+        self.obs_mode = obs
+        self.max_episode_steps = max_episode_steps
+        self.forward_step = forward_step
+        self.turn_step = math.radians(turn_step)
+        self.step_penalty = step_penalty
+        self.success_reward = success_reward
+        self.render_mode = render_mode
+        self.reach = self.goal.radius + self.layout.agent_radius + 1.1 * forward_step
+        self.action_space = spaces.Discrete(3)
+        if obs == "rgb":
+            self.observation_space = spaces.Box(0, 255, (obs_height, obs_width, 3), dtype=np.uint8)
+        else:
+            self.observation_space = spaces.Box(-1.0, 1.0, (4,), dtype=np.float32)
+        self._obs_size = (obs_width, obs_height)
+        self._renderer = None
+        self.x = self.z = self.heading = 0.0
+        self.step_count = 0
+        self.path: list[tuple[float, float]] = []
+
+    # ------------------------------------------------------------------ pose and observation
+
+    @property
+    def renderer(self):
+        """The MiniWorld scene, built on first use (creating an OpenGL context costs seconds)."""
+        if self._renderer is None:
+            from sb3_disagree.envs.render import ApartmentRenderer
+
+            self._renderer = ApartmentRenderer(self.layout, *self._obs_size)
+        return self._renderer
+
+    @property
+    def distance(self) -> float:
+        return math.hypot(self.goal.x - self.x, self.goal.z - self.z)
+
+    def _obs(self) -> np.ndarray:
+        if self.obs_mode == "state":
+            return np.array([self.x / 8.0, self.z / 8.0, math.cos(self.heading), math.sin(self.heading)],
+                            dtype=np.float32)
+        return self.renderer.egocentric(self.x, self.z, self.heading)
+
+    def _info(self, success: bool = False) -> dict[str, Any]:
+        return {
+            "room": self.layout.room_at(self.x, self.z),
+            "goal_room": self.goal.room,
+            "position": (self.x, self.z),
+            "heading": self.heading,
+            "distance": self.distance,
+            "is_success": success,
+        }
+
+    def set_pose(self, x: float, z: float, heading: float) -> None:
+        """Put the agent at a pose (for tests, pictures and the expert); the episode goes on from there."""
+        self.x, self.z, self.heading = float(x), float(z), float(heading)
+
+    # ------------------------------------------------------------------ gymnasium API
+
+    def reset(self, *, seed: Optional[int] = None, options: Optional[dict] = None) -> tuple[np.ndarray, dict]:
+        super().reset(seed=seed)
+        c, r = self.layout.corridor, self.layout.agent_radius
+        while True:
+            x = self.np_random.uniform(c.min_x + r, c.max_x - r)
+            z = self.np_random.uniform(c.min_z + r, c.max_z - r)
+            if not self.layout.blocked(x, z):
+                break
+        self.set_pose(x, z, self.np_random.uniform(-math.pi, math.pi))
+        self.step_count = 0
+        self.path = [(self.x, self.z)]
+        return self._obs(), self._info()
+
+    def step(self, action: int) -> tuple[np.ndarray, float, bool, bool, dict]:
+        action = int(action)
+        if not self.action_space.contains(action):
+            raise ValueError(f"invalid action {action}; actions are 0 turn left, 1 turn right, 2 move forward")
+        before = self.distance
+        if action == TURN_LEFT:
+            self.heading = _wrap(self.heading + self.turn_step)
+        elif action == TURN_RIGHT:
+            self.heading = _wrap(self.heading - self.turn_step)
+        else:
+            x = self.x + self.forward_step * math.cos(self.heading)
+            z = self.z - self.forward_step * math.sin(self.heading)
+            if not self.layout.blocked(x, z):
+                self.x, self.z = x, z
+        self.step_count += 1
+        self.path.append((self.x, self.z))
+        success = self.distance < self.reach
+        reward = before - self.distance - self.step_penalty + (self.success_reward if success else 0.0)
+        truncated = not success and self.step_count >= self.max_episode_steps
+        return self._obs(), reward, success, truncated, self._info(success)
+
+    def render(self) -> Optional[np.ndarray]:
+        if self.render_mode != "rgb_array":
+            return None
+        from sb3_disagree.envs.topdown import draw_trajectory
+
+        return draw_trajectory(self.layout, self.path, goal=self.goal.name, background=self._top_view())
+
+    def _top_view(self) -> Optional[np.ndarray]:
+        return self.renderer.top_view() if self.obs_mode == "rgb" else None
+
+    def close(self) -> None:
+        if self._renderer is not None:
+            self._renderer.close()
+            self._renderer = None
+
+
+def _wrap(angle: float) -> float:
+    return (angle + math.pi) % (2 * math.pi) - math.pi
+
+
+__all__ = ["ACTION_NAMES", "CORRIDOR", "MOVE_FORWARD", "TURN_LEFT", "TURN_RIGHT", "ApartmentEnv"]

@@ -1,0 +1,59 @@
+"""
+MiniWorld as the apartment's renderer: the scene is built once, then drawn from any agent pose.
+
+Importing this module imports MiniWorld; :mod:`sb3_disagree.envs` arranges pyglet's headless mode
+before that when there is no display.
+"""
+
+import numpy as np
+from miniworld.entity import COLORS, Box
+from miniworld.miniworld import MiniWorldEnv
+
+from sb3_disagree.envs.layout import EXTRA_COLORS, Layout
+
+for _name, _rgb in EXTRA_COLORS.items():
+    COLORS.setdefault(_name, np.array(_rgb))
+
+
+class ApartmentRenderer(MiniWorldEnv):
+    """
+    The apartment's rooms, doorways and boxes as a MiniWorld scene. Dynamics live in the layout; this
+    class only draws, so it never regenerates the world after construction.
+
+    :param layout: The apartment to draw
+    :param obs_width: Width of the egocentric frame
+    :param obs_height: Height of the egocentric frame
+    """
+
+    def __init__(self, layout: Layout, obs_width: int = 80, obs_height: int = 60) -> None:
+        self.layout = layout
+        super().__init__(max_episode_steps=10**9, obs_width=obs_width, obs_height=obs_height)
+
+    def _gen_world(self) -> None:
+        rooms = {}
+        for room in self.layout.all_rooms:
+            rooms[room.name] = self.add_rect_room(
+                min_x=room.min_x, max_x=room.max_x, min_z=room.min_z, max_z=room.max_z,
+                wall_tex=room.wall_tex, floor_tex=room.floor_tex,
+            )
+        corridor = rooms[self.layout.corridor.name]
+        for door in self.layout.doorways:
+            self.connect_rooms(corridor, rooms[door.room], min_x=door.min_x, max_x=door.max_x)
+        for obj in self.layout.objects:
+            self.place_entity(Box(color=obj.color, size=list(obj.size)), pos=np.array([obj.x, 0.0, obj.z]), dir=0.0)
+        c = self.layout.corridor
+        self.place_agent(pos=np.array([(c.min_x + c.max_x) / 2, 0.0, (c.min_z + c.max_z) / 2]), dir=0.0)
+
+    def egocentric(self, x: float, z: float, heading: float) -> np.ndarray:
+        """
+        :return: The agent's view from (x, z) facing ``heading``, uint8 (H, W, 3)
+        """
+        self.agent.pos = np.array([x, 0.0, z])
+        self.agent.dir = heading
+        return self.render_obs()
+
+    def top_view(self) -> np.ndarray:
+        """
+        :return: The map seen from above without the agent (800x600), image-up = -z
+        """
+        return self.render_top_view(frame_buffer=self.vis_fb, render_agent=False)
