@@ -51,6 +51,22 @@ class DistanceField:
             raise ValueError("the goal region has no free cell: is the goal reachable?")
         self.goal = goal
         self.dist = _dijkstra(self.free, goal, cell)
+        # Precomputed look-ups, so that the expert's many queries per step are O(1):
+        # the nearest reachable cell of every cell, and the next cell down the distance of every cell.
+        from scipy.ndimage import distance_transform_edt
+
+        reachable = np.isfinite(self.dist)
+        _, (self._near_i, self._near_j) = distance_transform_edt(~reachable, return_indices=True)
+        padded = np.pad(self.dist, 1, constant_values=np.inf)
+        n, m = self.dist.shape
+        shifted = np.stack([padded[1 + di:1 + di + n, 1 + dj:1 + dj + m] for di, dj in _NEIGHBOURS])
+        k = shifted.argmin(0)
+        better = shifted.min(0) < self.dist
+        ii, jj = np.meshgrid(np.arange(n), np.arange(m), indexing="ij")
+        offsets = np.array(_NEIGHBOURS)
+        self._down_i = np.where(better, ii + offsets[k, 0], ii)
+        self._down_j = np.where(better, jj + offsets[k, 1], jj)
+        self._waypoints: dict[int, tuple[np.ndarray, np.ndarray]] = {}
 
     def index(self, x: float, z: float) -> tuple[int, int]:
         i = int(round((x - self.x0) / self.cell))
@@ -61,32 +77,23 @@ class DistanceField:
         return self.x0 + i * self.cell, self.z0 + j * self.cell
 
     def nearest_free(self, x: float, z: float) -> tuple[int, int]:
+        """The reachable free cell nearest to (x, z)."""
         i, j = self.index(x, z)
-        if self.free[i, j] and np.isfinite(self.dist[i, j]):
-            return i, j
-        ii, jj = np.nonzero(self.free & np.isfinite(self.dist))
-        k = np.argmin((ii - i) ** 2 + (jj - j) ** 2)
-        return int(ii[k]), int(jj[k])
+        return int(self._near_i[i, j]), int(self._near_j[i, j])
 
     def waypoint(self, x: float, z: float, lookahead: int) -> tuple[float, float]:
-        """Follow the steepest descent of the distance from (x, z) for ``lookahead`` cells."""
-        i, j = self.nearest_free(x, z)
-        n, m = self.dist.shape
-        for _ in range(lookahead):
-            if self.goal[i, j]:
-                break
-            best = min(((i + di, j + dj) for di, dj in _NEIGHBOURS if 0 <= i + di < n and 0 <= j + dj < m),
-                       key=lambda ij: self.dist[ij])
-            if self.dist[best] >= self.dist[i, j]:
-                break
-            i, j = best
-        return self.point(i, j)
+        """The point ``lookahead`` cells down the steepest descent of the distance from (x, z)."""
+        if lookahead not in self._waypoints:
+            wi, wj = self._near_i, self._near_j
+            for _ in range(lookahead):
+                wi, wj = self._down_i[wi, wj], self._down_j[wi, wj]
+            self._waypoints[lookahead] = (wi, wj)
+        wi, wj = self._waypoints[lookahead]
+        i, j = self.index(x, z)
+        return self.point(int(wi[i, j]), int(wj[i, j]))
 
     def cost(self, x: float, z: float) -> float:
         """Geodesic distance; outside the free cells, that of the nearest free cell plus the offset to it."""
-        i, j = self.index(x, z)
-        if self.free[i, j] and np.isfinite(self.dist[i, j]):
-            return float(self.dist[i, j])
         fi, fj = self.nearest_free(x, z)
         fx, fz = self.point(fi, fj)
         return float(self.dist[fi, fj]) + math.hypot(fx - x, fz - z)
