@@ -20,6 +20,7 @@ from typing import Any, Optional
 
 import numpy as np
 import yaml
+from docs_section import write_section
 
 ROOT = Path(__file__).resolve().parent
 RESULTS = ROOT / "results" / "classic"
@@ -148,26 +149,18 @@ def cmd_report(args: argparse.Namespace) -> None:
         ["| env | algorithm | seeds | steps to threshold: median (min-max) | final return (mean +- std over seeds) "
          "| env steps/s (median) |", "|---|---|---|---|---|---|", *rows]
     )
-    text = (
-        "<!-- classic-control:start -->\n"
+    body = (
         f"Command: `python benchmarks/classic_control.py run --seeds 0 1 2 3 4 --jobs 2 && "
         f"python benchmarks/classic_control.py report`\n\n"
         f"Machine: {platform.machine()}, {os.cpu_count()} cores, one torch thread per run, two runs at a time. "
         f"Budget: {', '.join(f'{k} {v // 1000}k env steps' for k, v in BUDGETS.items())} for every algorithm. "
         "Thresholds: CartPole-v1 475, Acrobot-v1 -100, reached when the mean return of 20 deterministic evaluation "
         f"episodes (every {args.eval_freq // 1000}k steps) reaches it. Final return: the last evaluation. "
-        "env steps/s: training wall-clock, evaluation time excluded.\n\n"
+        "env steps/s: training wall-clock, evaluation time excluded. Hyperparameters: "
+        "`benchmarks/hyperparams/<algo>.yml`.\n\n"
         f"{table}\n"
-        "<!-- classic-control:end -->"
     )
-    doc = ROOT.parent / "docs" / "benchmarks.md"
-    old = doc.read_text() if doc.exists() else "# Benchmarks\n\n## ACER on classic control\n\n"
-    if "<!-- classic-control:start -->" in old:
-        head, rest = old.split("<!-- classic-control:start -->", 1)
-        old = head + text + rest.split("<!-- classic-control:end -->", 1)[1]
-    else:
-        old = old.rstrip() + "\n\n" + text + "\n"
-    doc.write_text(old)
+    write_section("classic-control", "ACER against A2C, PPO and DQN on classic control", body)
     print(table)
 
 
