@@ -2,7 +2,7 @@
 
 import copy
 from functools import partial
-from typing import Any, Optional
+from typing import Any, Optional, Union
 
 import numpy as np
 import torch as th
@@ -16,40 +16,52 @@ from stable_baselines3.common.utils import polyak_update
 from torch import nn
 
 
+def _mlp(in_dim: int, sizes: list[int], activation_fn: type[nn.Module]) -> tuple[nn.Sequential, int]:
+    layers: list[nn.Module] = []
+    for size in sizes:
+        layers += [nn.Linear(in_dim, size), activation_fn()]
+        in_dim = size
+    return nn.Sequential(*layers), in_dim
+
+
 class ACERNetwork(nn.Module):
     """
-    Features extractor and MLP trunk shared by two linear heads: policy logits and Q(s, .).
+    A features extractor feeding two linear heads, policy logits and Q(s, .), through MLP layers that
+    are either shared (``net_arch`` a list) or separate (``dict(pi=[...], qf=[...])``, as SB3's SAC).
 
     :param features_extractor: Network that maps preprocessed observations to features
-    :param net_arch: Sizes of the hidden layers of the trunk after the features extractor
-    :param activation_fn: Activation between the trunk's layers
+    :param net_arch: Hidden layer sizes: a list for a shared trunk, or a dict with keys ``pi`` and ``qf``
+    :param activation_fn: Activation between the hidden layers
     :param n_actions: Number of discrete actions
     """
 
     def __init__(
         self,
         features_extractor: BaseFeaturesExtractor,
-        net_arch: list[int],
+        net_arch: Union[list[int], dict[str, list[int]]],
         activation_fn: type[nn.Module],
         n_actions: int,
     ) -> None:
         super().__init__()
         self.features_extractor = features_extractor
-        layers: list[nn.Module] = []
-        last = features_extractor.features_dim
-        for size in net_arch:
-            layers += [nn.Linear(last, size), activation_fn()]
-            last = size
-        self.trunk = nn.Sequential(*layers)
-        self.action_net = nn.Linear(last, n_actions)
-        self.q_net = nn.Linear(last, n_actions)
+        dim = features_extractor.features_dim
+        if isinstance(net_arch, dict):
+            self.trunk = nn.Identity()
+            self.pi_net, pi_dim = _mlp(dim, list(net_arch.get("pi", [])), activation_fn)
+            self.qf_net, qf_dim = _mlp(dim, list(net_arch.get("qf", [])), activation_fn)
+        else:
+            self.trunk, dim = _mlp(dim, list(net_arch), activation_fn)
+            self.pi_net, self.qf_net = nn.Identity(), nn.Identity()
+            pi_dim = qf_dim = dim
+        self.action_net = nn.Linear(pi_dim, n_actions)
+        self.q_net = nn.Linear(qf_dim, n_actions)
 
     def forward(self, features: th.Tensor) -> tuple[th.Tensor, th.Tensor]:
         latent = self.trunk(features)
-        return self.action_net(latent), self.q_net(latent)
+        return self.action_net(self.pi_net(latent)), self.q_net(self.qf_net(latent))
 
     def logits(self, features: th.Tensor) -> th.Tensor:
-        return self.action_net(self.trunk(features))
+        return self.action_net(self.pi_net(self.trunk(features)))
 
 
 class ACERPolicy(BasePolicy):
@@ -63,8 +75,10 @@ class ACERPolicy(BasePolicy):
     :param observation_space: Observation space
     :param action_space: Action space (``Discrete``)
     :param lr_schedule: Learning rate schedule (could be constant)
-    :param net_arch: Hidden layer sizes of the shared trunk; default ``[64, 64]`` for MLP features
-        and ``[]`` for NatureCNN (its 512 features feed the heads directly)
+    :param net_arch: Hidden layer sizes after the features extractor: a list for a trunk shared by the
+        policy and Q heads, or ``dict(pi=[...], qf=[...])`` for separate ones; default
+        ``dict(pi=[64, 64], qf=[64, 64])`` for MLP features and ``[]`` for NatureCNN (its 512 features
+        feed both heads directly)
     :param activation_fn: Activation function of the trunk
     :param ortho_init: Whether to use orthogonal initialization (as SB3's actor-critic policies)
     :param features_extractor_class: Features extractor to use
@@ -79,7 +93,7 @@ class ACERPolicy(BasePolicy):
         observation_space: spaces.Space,
         action_space: spaces.Discrete,
         lr_schedule: Schedule,
-        net_arch: Optional[list[int]] = None,
+        net_arch: Optional[Union[list[int], dict[str, list[int]]]] = None,
         activation_fn: type[nn.Module] = nn.Tanh,
         ortho_init: bool = True,
         features_extractor_class: type[BaseFeaturesExtractor] = FlattenExtractor,
@@ -104,8 +118,10 @@ class ACERPolicy(BasePolicy):
         if not isinstance(action_space, spaces.Discrete):
             raise ValueError(f"ACER supports Discrete action spaces only, got {action_space}")
         if net_arch is None:
-            net_arch = [] if issubclass(features_extractor_class, NatureCNN) else [64, 64]
-        self.net_arch = list(net_arch)
+            # Separate MLPs for the policy and Q heads: with a shared MLP trunk the large Q-loss gradients
+            # swamp the policy's (ACER did not learn Acrobot-v1 in 60k steps with one, see docs/acer.md).
+            net_arch = [] if issubclass(features_extractor_class, NatureCNN) else dict(pi=[64, 64], qf=[64, 64])
+        self.net_arch = net_arch
         self.activation_fn = activation_fn
         self.ortho_init = ortho_init
         self.n_actions = int(action_space.n)
@@ -116,8 +132,8 @@ class ACERPolicy(BasePolicy):
         self.net = ACERNetwork(self.make_features_extractor(), self.net_arch, self.activation_fn, self.n_actions)
         if self.ortho_init:
             # Same gains as SB3's ActorCriticPolicy: small policy logits give a near-uniform first policy.
-            gains = {self.net.features_extractor: np.sqrt(2), self.net.trunk: np.sqrt(2), self.net.action_net: 0.01,
-                     self.net.q_net: 1.0}
+            gains = {self.net.features_extractor: np.sqrt(2), self.net.trunk: np.sqrt(2), self.net.pi_net: np.sqrt(2),
+                     self.net.qf_net: np.sqrt(2), self.net.action_net: 0.01, self.net.q_net: 1.0}
             for module, gain in gains.items():
                 module.apply(partial(self.init_weights, gain=gain))
         self.average_net = copy.deepcopy(self.net)

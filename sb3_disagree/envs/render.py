@@ -15,6 +15,15 @@ for _name, _rgb in EXTRA_COLORS.items():
     COLORS.setdefault(_name, np.array(_rgb))
 
 
+class StaticBox(Box):
+    """A box that never moves: MiniWorld compiles it into the scene's display list instead of drawing
+    it call by call every frame."""
+
+    @property
+    def is_static(self) -> bool:
+        return True
+
+
 class ApartmentRenderer(MiniWorldEnv):
     """
     The apartment's rooms, doorways and boxes as a MiniWorld scene. Dynamics live in the layout; this
@@ -40,7 +49,7 @@ class ApartmentRenderer(MiniWorldEnv):
         for door in self.layout.doorways:
             self.connect_rooms(corridor, rooms[door.room], min_x=door.min_x, max_x=door.max_x)
         for obj in self.layout.objects:
-            self.place_entity(Box(color=obj.color, size=list(obj.size)), pos=np.array([obj.x, 0.0, obj.z]), dir=0.0)
+            self.place_entity(StaticBox(color=obj.color, size=list(obj.size)), pos=np.array([obj.x, 0.0, obj.z]), dir=0.0)
         c = self.layout.corridor
         self.place_agent(pos=np.array([(c.min_x + c.max_x) / 2, 0.0, (c.min_z + c.max_z) / 2]), dir=0.0)
 
