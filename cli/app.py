@@ -29,5 +29,11 @@ def _root(
     """Disagreement Options on Stable-Baselines3."""
 
 
+from sb3_disagree.cli import priors as _priors  # noqa: E402
+
+app.add_typer(_priors.app, name="priors")
+app.command("similarity")(_priors.similarity)
+
+
 def main() -> None:
     app()

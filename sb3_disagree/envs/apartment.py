@@ -79,6 +79,7 @@ class ApartmentEnv(gym.Env):
             self.observation_space = spaces.Box(-1.0, 1.0, (4,), dtype=np.float32)
         self._obs_size = (obs_width, obs_height)
         self._renderer = None
+        self._expert = None
         self.x = self.z = self.heading = 0.0
         self.step_count = 0
         self.path: list[tuple[float, float]] = []
@@ -153,6 +154,14 @@ class ApartmentEnv(gym.Env):
         reward = before - self.distance - self.step_penalty + (self.success_reward if success else 0.0)
         truncated = not success and self.step_count >= self.max_episode_steps
         return self._obs(), reward, success, truncated, self._info(success)
+
+    def expert_action(self) -> int:
+        """The scripted expert's action for the current state (what imitation learning is labelled with)."""
+        if self._expert is None:
+            from sb3_disagree.envs.expert import ApartmentExpert
+
+            self._expert = ApartmentExpert(self)
+        return self._expert.planned_action(self.x, self.z, self.heading)
 
     def render(self) -> Optional[np.ndarray]:
         if self.render_mode != "rgb_array":

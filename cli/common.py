@@ -1,0 +1,32 @@
+"""What the ``dopt`` commands share: the console, clean failures, defaults."""
+
+import contextlib
+import sys
+from collections.abc import Iterator
+
+import typer
+from rich.console import Console
+
+from sb3_disagree.language import NotEnoughPriorsError, UnknownWordError
+from sb3_disagree.zoo import ZooError
+
+console = Console()
+err_console = Console(stderr=True)
+DEFAULT_ENV = "sb3_disagree/Apartment-v0"
+# Errors a user can cause with their input: a message and exit code 2, never a traceback.
+USER_ERRORS = (ZooError, UnknownWordError, NotEnoughPriorsError, FileNotFoundError, KeyError, ValueError)
+
+
+@contextlib.contextmanager
+def clean_errors() -> Iterator[None]:
+    try:
+        yield
+    except USER_ERRORS as exc:
+        message = exc.args[0] if isinstance(exc, KeyError) and exc.args else str(exc)
+        err_console.print(f"[bold red]error:[/] {message}", highlight=False)
+        raise typer.Exit(code=2) from None
+
+
+def command_line() -> str:
+    """The command as typed, for the records that say how something was made."""
+    return "dopt " + " ".join(sys.argv[1:])

@@ -1,0 +1,215 @@
+"""``dopt priors ...`` and ``dopt similarity``: the zoo and the choice of priors by language."""
+
+import json
+from pathlib import Path
+from typing import Optional
+
+import typer
+from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+from rich.table import Table
+
+from sb3_disagree.cli.common import DEFAULT_ENV, clean_errors, command_line, console
+from sb3_disagree.language import load_embedding, rank_by_similarity
+
+app = typer.Typer(help="The prior zoo: list, show, add, remove, evaluate and train priors.", no_args_is_help=True)
+
+ZOO_OPT = typer.Option(None, "--zoo", help="Zoo folder (default: the shipped zoo).")
+ENV_OPT = typer.Option(DEFAULT_ENV, "--env", help="Gymnasium id of the environment.")
+EMB_OPT = typer.Option(None, "--embedding", help="Word vectors (word2vec/GloVe/fastText/KeyedVectors); default MiniLM.")
+
+
+def _zoo(path: Optional[Path]):
+    from sb3_disagree.zoo import Zoo
+
+    return Zoo(path)
+
+
+def _progress() -> Progress:
+    return Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
+                    console=console, transient=True)
+
+
+@app.command("list")
+def list_priors(
+    env: Optional[str] = typer.Option(None, "--env", help="Only this environment's priors."),
+    goal: Optional[str] = typer.Option(None, "--goal", help="Rank by similarity to this goal and mark the two chosen."),
+    k: int = typer.Option(2, "--k", help="How many priors the goal would use."),
+    zoo: Optional[Path] = ZOO_OPT,
+    embedding: Optional[Path] = EMB_OPT,
+) -> None:
+    """The zoo as a table; damaged entries are listed with their problem."""
+    with clean_errors():
+        entries = _zoo(zoo).entries(env or (DEFAULT_ENV if goal else None))
+        sims: dict[str, float] = {}
+        chosen: set[str] = set()
+        if goal:
+            usable = [e.goal for e in entries if not e.problem]
+            ranked = rank_by_similarity(goal, [e.goal for e in entries], load_embedding(embedding))
+            sims = dict(ranked)
+            chosen = {label for label, _ in [r for r in ranked if r[0] in usable][:k]}
+            entries.sort(key=lambda e: -sims.get(e.goal, 2.0))
+        table = Table(title=f"priors for {goal!r}" if goal else "prior zoo")
+        for col in ["goal", "env", "algorithm", "method", "steps", "success", *(["similarity", ""] if goal else []),
+                    "status"]:
+            table.add_column(col)
+        for e in entries:
+            card = e.card
+            success = card.evaluation.get("success_rate") if card else None
+            row = [e.goal, e.env_id, card.sb3_class.rsplit(".", 1)[-1] if card else "?",
+                   str(card.training.get("method", "?")) if card else "?", str(card.training.get("steps", "?")) if card else "?",
+                   f"{success:.2f}" if success is not None else "-"]
+            if goal:
+                row += [f"{sims[e.goal]:.3f}" if e.goal in sims else "(goal)", "[bold green]chosen[/]" if e.goal in chosen else ""]
+            row.append("[green]ok[/]" if not e.problem else f"[red]{e.problem}[/]")
+            table.add_row(*row)
+        console.print(table)
+        if goal and len(chosen) < k:
+            console.print(f"[yellow]only {len(chosen)} usable prior(s) besides {goal!r}; the method needs {k}[/]")
+
+
+@app.command()
+def show(goal: str, env: str = ENV_OPT, zoo: Optional[Path] = ZOO_OPT) -> None:
+    """A prior's card."""
+    with clean_errors():
+        entry = _zoo(zoo).get(goal, env)
+        console.print_json(json.dumps(entry.card.__dict__ if entry.card else {}))
+        console.print(f"status: {'ok' if not entry.problem else entry.problem}")
+
+
+@app.command()
+def add(
+    model: Path = typer.Argument(..., help="An SB3 model file (ACER, PPO, A2C, TRPO, MaskablePPO)."),
+    goal: str = typer.Option(..., "--goal", help="The goal it reaches."),
+    env: str = ENV_OPT,
+    episodes: int = typer.Option(100, "--episodes", help="Evaluation episodes for the card (0: none)."),
+    replace: bool = typer.Option(False, "--replace", help="Replace an existing prior for this goal."),
+    zoo: Optional[Path] = ZOO_OPT,
+) -> None:
+    """Add a saved model to the zoo, evaluated and with its card."""
+    with clean_errors():
+        if not model.exists():
+            raise FileNotFoundError(f"{model} does not exist")
+        z = _zoo(zoo)
+        entry = z.add(model, goal, env, training={"method": "external"}, command=command_line(), replace=replace)
+        if episodes:
+            _evaluate_into_card(z, entry, episodes)
+        console.print(f"added {goal!r} to {z.root}")
+
+
+@app.command()
+def remove(goal: str, env: str = ENV_OPT, zoo: Optional[Path] = ZOO_OPT) -> None:
+    """Remove a prior from the zoo."""
+    with clean_errors():
+        _zoo(zoo).remove(goal, env)
+        console.print(f"removed {goal!r}")
+
+
+@app.command("eval")
+def eval_prior(
+    goal: str,
+    episodes: int = typer.Option(100, "--episodes"),
+    deterministic: bool = typer.Option(False, "--deterministic/--stochastic",
+                                       help="Greedy actions, or sampled as the method follows priors."),
+    seed: int = typer.Option(10_000, "--seed"),
+    env: str = ENV_OPT,
+    zoo: Optional[Path] = ZOO_OPT,
+) -> None:
+    """Evaluate a prior alone from the environment's start distribution."""
+    with clean_errors():
+        from sb3_disagree.prior_training import evaluate, make_env
+
+        z = _zoo(zoo)
+        entry = z.get(goal, env)
+        venv = make_env(env, goal, entry.card.env_kwargs if entry.card else {}, n_envs=4, seed=seed)
+        model = z.load(entry, venv, device="cpu")
+        with _progress() as progress:
+            task = progress.add_task(f"evaluating {goal}", total=episodes)
+            result = evaluate(model, venv, episodes, deterministic, lambda n: progress.update(task, completed=n))
+        console.print(f"{goal}: success {result.success_rate:.2f}, mean length {result.mean_length:.1f}, "
+                      f"mean return {result.mean_return:.2f} over {episodes} episodes "
+                      f"({'greedy' if deterministic else 'sampled'} actions)")
+
+
+@app.command()
+def train(
+    goal: str = typer.Option(..., "--goal", help="The goal object to reach."),
+    method: str = typer.Option("dagger", "--method", help="dagger (imitate the expert), acer or ppo."),
+    env: str = ENV_OPT,
+    steps: int = typer.Option(200_000, "--steps", help="Env steps for acer/ppo."),
+    rounds: int = typer.Option(6, "--rounds", help="DAgger rounds."),
+    steps_per_round: int = typer.Option(3_000, "--steps-per-round", help="Labelled steps per DAgger round."),
+    epochs: int = typer.Option(6, "--epochs", help="DAgger passes over the data per round."),
+    n_envs: int = typer.Option(4, "--n-envs"),
+    seed: int = typer.Option(0, "--seed"),
+    episodes: int = typer.Option(100, "--episodes", help="Evaluation episodes for the card."),
+    replace: bool = typer.Option(False, "--replace", help="Replace an existing prior for this goal."),
+    zoo: Optional[Path] = ZOO_OPT,
+) -> None:
+    """Train a prior for a goal and add it to the zoo with its card."""
+    with clean_errors():
+        import tempfile
+
+        from sb3_disagree.prior_training import METHODS, make_env, train_dagger, train_rl
+
+        if method not in METHODS:
+            raise ValueError(f"--method must be one of {', '.join(METHODS)}, got {method!r}")
+        z = _zoo(zoo)
+        if not replace and any(e.goal == goal for e in z.entries(env)):
+            raise ValueError(f"the zoo already has a prior for {goal!r} in {env}; pass --replace to retrain it")
+        venv = make_env(env, goal, n_envs=n_envs, seed=seed)
+        if method == "dagger":
+            with _progress() as progress:
+                task = progress.add_task(f"DAgger {goal}", total=rounds)
+                model, record = train_dagger(venv, seed=seed, rounds=rounds, steps_per_round=steps_per_round,
+                                             epochs=epochs,
+                                             progress=lambda line: (progress.advance(task), console.print(line)))
+        else:
+            model, record = train_rl(venv, method, steps, seed=seed, progress_bar=True)
+        with tempfile.TemporaryDirectory() as tmp:
+            model.save(Path(tmp) / "model.zip")
+            entry = z.add(Path(tmp) / "model.zip", goal, env, training=record, command=command_line(), replace=replace)
+        _evaluate_into_card(z, entry, episodes)
+
+
+def _evaluate_into_card(z, entry, episodes: int) -> None:
+    """Evaluate a new entry with sampled actions (as the method follows priors) and record it on its card."""
+    from dataclasses import asdict
+
+    from sb3_disagree.prior_training import evaluate, make_env
+    from sb3_disagree.zoo import CARD
+
+    venv = make_env(entry.env_id, entry.goal, entry.card.env_kwargs, n_envs=4, seed=10_000)
+    model = z.load(entry, venv, device="cpu")
+    with _progress() as progress:
+        task = progress.add_task(f"evaluating {entry.goal}", total=episodes)
+        result = evaluate(model, venv, episodes, deterministic=False, progress=lambda n: progress.update(task, completed=n))
+    entry.card.evaluation = result.as_dict()
+    (entry.path / CARD).write_text(json.dumps(asdict(entry.card), indent=2) + "\n")
+    console.print(f"{entry.goal}: success {result.success_rate:.2f} over {episodes} episodes, "
+                  f"mean length {result.mean_length:.1f}")
+
+
+def similarity(
+    words: list[str] = typer.Argument(..., help="Goal words (quote multi-word goals)."),
+    plot: Optional[Path] = typer.Option(None, "--plot", help="Draw the matrix as a heatmap PNG."),
+    embedding: Optional[Path] = EMB_OPT,
+) -> None:
+    """Cosine similarities between goal words, as the paper's Figure 1."""
+    with clean_errors():
+        from sb3_disagree.language import normalise_goal
+
+        emb = load_embedding(embedding)
+        labels = [normalise_goal(w) for w in words]
+        m = emb.similarity_matrix(labels)
+        table = Table(title=f"cosine similarity ({emb.name})")
+        table.add_column("")
+        for w in labels:
+            table.add_column(w, justify="right")
+        for i, w in enumerate(labels):
+            table.add_row(w, *[f"{m[i, j]:.4f}" for j in range(len(labels))])
+        console.print(table)
+        if plot is not None:
+            from sb3_disagree.plots import similarity_heatmap
+
+            similarity_heatmap(m, labels, plot, title=f"cosine similarity, {emb.name}")
+            console.print(f"wrote {plot}")

@@ -1,0 +1,198 @@
+"""
+Making priors: imitation of an environment's scripted expert with DAgger-style relabelling, or
+reinforcement learning (ACER, PPO), then evaluation from the environment's own start distribution.
+
+An environment offers an expert by a method ``expert_action()`` that returns the expert's action for
+its current state (the apartment does); DAgger needs nothing else.
+"""
+
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any, Optional
+
+import numpy as np
+import torch as th
+from stable_baselines3.common.base_class import BaseAlgorithm
+from stable_baselines3.common.env_util import make_vec_env
+from stable_baselines3.common.preprocessing import is_image_space
+from stable_baselines3.common.vec_env import VecEnv
+
+from sb3_disagree.acer import ACER
+
+METHODS = ("dagger", "acer", "ppo")
+# Small image networks keep a zoo of ten priors well under 60 MB.
+PRIOR_POLICY_KWARGS = {"CnnPolicy": dict(features_extractor_kwargs=dict(features_dim=128)), "MlpPolicy": {}}
+
+
+@dataclass
+class Evaluation:
+    """Success rate, episode length and return of a policy acting alone."""
+
+    success_rate: float
+    mean_length: float
+    mean_return: float
+    episodes: int
+    deterministic: bool
+
+    def as_dict(self) -> dict[str, Any]:
+        return {"success_rate": self.success_rate, "mean_length": self.mean_length, "mean_return": self.mean_return,
+                "episodes": self.episodes, "deterministic": self.deterministic}
+
+
+def make_env(env_id: str, goal: str, env_kwargs: Optional[dict] = None, n_envs: int = 1, seed: int = 0) -> VecEnv:
+    """A VecEnv of the task ``goal`` in ``env_id``, each env in a Monitor."""
+    import sb3_disagree.envs  # noqa: F401  (registers the environments)
+
+    return make_vec_env(env_id, n_envs=n_envs, seed=seed, env_kwargs=dict(goal=goal, **(env_kwargs or {})))
+
+
+def evaluate(model: BaseAlgorithm, env: VecEnv, episodes: int = 100, deterministic: bool = True,
+             progress: Optional[Callable[[int], None]] = None) -> Evaluation:
+    """
+    Run the policy alone for a number of episodes from the env's start distribution.
+
+    :param model: The policy
+    :param env: The environment (a VecEnv; its envs report ``is_success``)
+    :param episodes: Number of episodes
+    :param deterministic: Greedy actions if True, sampled otherwise
+    :param progress: Called with the number of finished episodes
+    """
+    obs = env.reset()
+    lengths, returns, successes = [], [], []
+    cur_len = np.zeros(env.num_envs, dtype=int)
+    cur_ret = np.zeros(env.num_envs)
+    while len(lengths) < episodes:
+        actions, _ = model.predict(obs, deterministic=deterministic)
+        obs, rewards, dones, infos = env.step(actions)
+        cur_len += 1
+        cur_ret += rewards
+        for i in np.flatnonzero(dones):
+            if len(lengths) < episodes:
+                lengths.append(int(cur_len[i]))
+                returns.append(float(cur_ret[i]))
+                successes.append(bool(infos[i].get("is_success", False)))
+                if progress:
+                    progress(len(lengths))
+            cur_len[i], cur_ret[i] = 0, 0.0
+    return Evaluation(float(np.mean(successes)), float(np.mean(lengths)), float(np.mean(returns)), episodes,
+                      deterministic)
+
+
+def policy_name(env: VecEnv) -> str:
+    return "CnnPolicy" if is_image_space(env.observation_space) else "MlpPolicy"
+
+
+def train_dagger(
+    env: VecEnv,
+    seed: int = 0,
+    rounds: int = 6,
+    steps_per_round: int = 3_000,
+    epochs: int = 6,
+    batch_size: int = 128,
+    learning_rate: float = 1e-3,
+    max_episode_steps: int = 200,
+    progress: Optional[Callable[[str], None]] = None,
+) -> tuple[ACER, dict[str, Any]]:
+    """
+    DAgger: the first round follows the expert; later rounds follow the learner with probability
+    ``1 - 0.5 ** round`` and the expert otherwise, and every visited state is labelled with the expert's
+    action; after each round the policy head is fitted to all labels so far (cross-entropy).
+
+    :param env: The VecEnv to imitate in; its envs have ``expert_action()``
+    :param seed: Seed of the policy and the rollouts
+    :param rounds: Data-collection rounds
+    :param steps_per_round: Labelled env steps per round
+    :param epochs: Passes over the aggregated data after each round
+    :param batch_size: Minibatch size
+    :param learning_rate: Adam's learning rate
+    :param max_episode_steps: Rollouts restart after this many steps (a stuck learner teaches little more)
+    :param progress: Called with a line of text after each round
+    :return: An ACER model whose policy imitates the expert, and a record of the training
+    """
+    name = policy_name(env)
+    model = ACER(name, env, seed=seed, policy_kwargs=PRIOR_POLICY_KWARGS[name])
+    env = model.get_env()  # as the policy sees it (channel-first images)
+    policy = model.policy
+    optimizer = th.optim.Adam(policy.net.parameters(), lr=learning_rate)
+    rng = np.random.default_rng(seed)
+    data_obs: list[np.ndarray] = []
+    data_act: list[np.ndarray] = []
+    obs = env.reset()
+    ep_len = np.zeros(env.num_envs, dtype=int)
+    start = time.perf_counter()
+    for r in range(rounds):
+        beta = 0.5 ** r  # probability of executing the expert's own action
+        collected = 0
+        while collected < steps_per_round:
+            labels = np.asarray(env.env_method("expert_action"), dtype=np.int64)
+            data_obs.append(obs.copy())
+            data_act.append(labels)
+            if r == 0:
+                actions = labels
+            else:
+                learner, _ = model.predict(obs, deterministic=False)
+                actions = np.where(rng.random(env.num_envs) < beta, labels, learner)
+            obs, _, dones, _ = env.step(actions)
+            ep_len = np.where(dones, 0, ep_len + 1)
+            if (ep_len >= max_episode_steps).any():
+                obs = env.reset()
+                ep_len[:] = 0
+            collected += env.num_envs
+        x = np.concatenate(data_obs)
+        y = np.concatenate(data_act)
+        loss, accuracy = _fit(policy, optimizer, x, y, epochs, batch_size, rng)
+        if progress:
+            progress(f"round {r + 1}/{rounds}: {len(y)} labels, loss {loss:.3f}, accuracy {accuracy:.3f}")
+    # The average network starts where the imitated policy is, so that ACER fine-tuning begins consistent.
+    policy.average_net.load_state_dict(policy.net.state_dict())
+    model.num_timesteps = int(len(y))
+    record = {"method": "dagger", "steps": int(len(y)), "seed": seed, "rounds": rounds, "epochs": epochs,
+              "final_loss": loss, "final_accuracy": accuracy, "seconds": round(time.perf_counter() - start, 1)}
+    return model, record
+
+
+def _fit(policy, optimizer, x: np.ndarray, y: np.ndarray, epochs: int, batch_size: int,
+         rng: np.random.Generator) -> tuple[float, float]:
+    policy.set_training_mode(True)
+    device = policy.device
+    for _ in range(epochs):
+        order = rng.permutation(len(y))
+        losses, correct = [], 0
+        for i in range(0, len(y), batch_size):
+            idx = order[i:i + batch_size]
+            obs = th.as_tensor(x[idx], device=device)
+            target = th.as_tensor(y[idx], device=device)
+            logits = policy.net.logits(policy.extract_features(obs, policy.net.features_extractor))
+            loss = th.nn.functional.cross_entropy(logits, target)
+            optimizer.zero_grad()
+            loss.backward()
+            optimizer.step()
+            losses.append(loss.item())
+            correct += int((logits.argmax(-1) == target).sum())
+    policy.set_training_mode(False)
+    return float(np.mean(losses)), correct / len(y)
+
+
+def train_rl(env: VecEnv, method: str, steps: int, seed: int = 0, progress_bar: bool = False) -> tuple[BaseAlgorithm, dict]:
+    """
+    Reinforcement learning from the environment's reward.
+
+    :param env: The VecEnv
+    :param method: "acer" or "ppo"
+    :param steps: Env steps
+    :param seed: Seed
+    :param progress_bar: Show SB3's progress bar
+    """
+    name = policy_name(env)
+    start = time.perf_counter()
+    if method == "acer":
+        model: BaseAlgorithm = ACER(name, env, seed=seed, policy_kwargs=PRIOR_POLICY_KWARGS[name])
+    elif method == "ppo":
+        from stable_baselines3 import PPO
+
+        model = PPO(name, env, seed=seed, policy_kwargs=PRIOR_POLICY_KWARGS[name])
+    else:
+        raise ValueError(f"method must be one of {', '.join(METHODS)}, got {method!r}")
+    model.learn(steps, progress_bar=progress_bar)
+    return model, {"method": method, "steps": steps, "seed": seed, "seconds": round(time.perf_counter() - start, 1)}
