@@ -49,9 +49,10 @@ def list_priors(
             chosen = {label for label, _ in [r for r in ranked if r[0] in usable][:k]}
             entries.sort(key=lambda e: -sims.get(e.goal, 2.0))
         table = Table(title=f"priors for {goal!r}" if goal else "prior zoo")
-        for col in ["goal", "env", "algorithm", "method", "steps", "success", *(["similarity", ""] if goal else []),
-                    "status"]:
-            table.add_column(col)
+        table.add_column("goal", no_wrap=True)
+        table.add_column("env", overflow="fold")
+        for col in ["algorithm", "method", "steps", "success", *(["similarity", ""] if goal else []), "status"]:
+            table.add_column(col, no_wrap=col in ("similarity", ""))
         for e in entries:
             card = e.card
             success = card.evaluation.get("success_rate") if card else None

@@ -5,6 +5,9 @@ Importing this module imports MiniWorld; :mod:`sb3_disagree.envs` arranges pygle
 before that when there is no display.
 """
 
+import contextlib
+import io
+
 import numpy as np
 from miniworld.entity import COLORS, Box
 from miniworld.miniworld import MiniWorldEnv
@@ -36,7 +39,9 @@ class ApartmentRenderer(MiniWorldEnv):
 
     def __init__(self, layout: Layout, obs_width: int = 80, obs_height: int = 60) -> None:
         self.layout = layout
-        super().__init__(max_episode_steps=10**9, obs_width=obs_width, obs_height=obs_height)
+        # MiniWorld prints "Falling back to num_samples=4" when llvmpipe caps anti-aliasing: harmless.
+        with contextlib.redirect_stdout(io.StringIO()):
+            super().__init__(max_episode_steps=10**9, obs_width=obs_width, obs_height=obs_height)
 
     def _gen_world(self) -> None:
         rooms = {}

@@ -1,0 +1,146 @@
+"""The prior zoo and `dopt priors`: cards, checks, atomic writes, error cases, the CLI."""
+
+import json
+
+import gymnasium as gym
+import pytest
+from stable_baselines3 import DQN, PPO
+from stable_baselines3.common.env_util import make_vec_env
+from typer.testing import CliRunner
+
+import sb3_disagree.envs  # noqa: F401
+from sb3_disagree import ACER
+from sb3_disagree.cli.app import app
+from sb3_disagree.zoo import Zoo, ZooError, identify_algorithm
+
+STATE_ID = "sb3_disagree/ApartmentState-v0"
+LABELS = ["shower", "bathtub", "toilet", "bed", "wardrobe", "nightstand"]
+runner = CliRunner()
+
+
+def _state_env(goal="shower"):
+    return make_vec_env(STATE_ID, n_envs=1, env_kwargs=dict(goal=goal))
+
+
+@pytest.fixture(scope="module")
+def model_files(tmp_path_factory):
+    d = tmp_path_factory.mktemp("models")
+    ACER("MlpPolicy", _state_env(), seed=0).save(d / "acer.zip")
+    PPO("MlpPolicy", _state_env(), seed=0, n_steps=64).save(d / "ppo.zip")
+    DQN("MlpPolicy", _state_env(), seed=0).save(d / "dqn.zip")
+    return d
+
+
+@pytest.fixture()
+def zoo(tmp_path, model_files):
+    z = Zoo(tmp_path / "zoo")
+    for goal in LABELS:
+        z.add(model_files / "acer.zip", goal, STATE_ID, training={"method": "test", "steps": 0, "seed": 0},
+              evaluation={"success_rate": 0.5}, command="test")
+    return z
+
+
+def test_cards_record_what_the_issue_asks(zoo, model_files):
+    entry = zoo.get("bed", STATE_ID)
+    card = json.loads((entry.path / "card.json").read_text())
+    for key in ["goal", "env_id", "env_kwargs", "observation_space", "action_space", "sb3_class", "training",
+                "evaluation", "sha256", "created", "command"]:
+        assert key in card, key
+    assert card["sb3_class"] == "sb3_disagree.acer.ACER" and card["action_space"]["n"] == 3
+    assert entry.path == zoo.root / "sb3_disagree__ApartmentState-v0" / "bed"
+
+
+def test_any_sb3_model_with_a_distribution_and_not_dqn(tmp_path, model_files):
+    assert identify_algorithm(model_files / "ppo.zip") == "stable_baselines3.PPO"
+    assert identify_algorithm(model_files / "acer.zip") == "sb3_disagree.acer.ACER"
+    z = Zoo(tmp_path)
+    entry = z.add(model_files / "ppo.zip", "toilet", STATE_ID)
+    model = z.load(entry, _state_env())
+    assert isinstance(model, PPO) and not model.policy.training
+    with pytest.raises(ZooError, match="discrete action distribution"):
+        z.add(model_files / "dqn.zip", "stove", STATE_ID)
+    assert [e.goal for e in z.entries()] == ["toilet"]  # nothing half-written remains
+
+
+def test_corrupt_entry_is_listed_and_refused(zoo):
+    entry = zoo.get("toilet", STATE_ID)
+    entry.model_path.write_bytes(b"not a zip at all")
+    listed = {e.goal: e for e in zoo.entries()}
+    assert len(listed) == len(LABELS)
+    assert "sha256" in listed["toilet"].problem and listed["shower"].problem is None
+    with pytest.raises(ZooError, match="cannot be used"):
+        zoo.load(listed["toilet"])
+    (zoo.get("bed", STATE_ID).path / "card.json").write_text("{broken")
+    assert "unreadable card" in {e.goal: e for e in zoo.entries()}["bed"].problem
+    assert "toilet" not in zoo.labels(STATE_ID)
+
+
+def test_mismatched_spaces_are_refused(zoo):
+    entry = zoo.get("shower", STATE_ID)
+    rgb_space_env = gym.make("sb3_disagree/Apartment-v0", goal="shower").unwrapped
+    rgb_space_env.observation_space  # the RGB space, no rendering needed to compare
+    with pytest.raises(ZooError, match="expects observations"):
+        zoo.load(entry, rgb_space_env)
+    assert zoo.load(entry, _state_env()) is not None
+
+
+def test_replace_and_remove(zoo, model_files):
+    with pytest.raises(ZooError, match="already has"):
+        zoo.add(model_files / "acer.zip", "bed", STATE_ID)
+    zoo.add(model_files / "ppo.zip", "bed", STATE_ID, replace=True)
+    assert zoo.get("bed", STATE_ID).card.sb3_class == "stable_baselines3.PPO"
+    zoo.remove("bed", STATE_ID)
+    assert "bed" not in [e.goal for e in zoo.entries()]
+    assert not any(p.name.startswith(".") for p in (zoo.root / "sb3_disagree__ApartmentState-v0").iterdir())
+
+
+def test_cli_list_marks_the_two_chosen(zoo):
+    result = runner.invoke(app, ["priors", "list", "--zoo", str(zoo.root), "--env", STATE_ID, "--goal", "bathtub"])
+    assert result.exit_code == 0, result.output
+    chosen = [line.split()[1] for line in result.output.splitlines() if "chosen" in line]
+    assert chosen == ["shower", "toilet"]
+    result = runner.invoke(app, ["priors", "list", "--zoo", str(zoo.root), "--env", STATE_ID, "--goal", "nightstand"])
+    assert [line.split()[1] for line in result.output.splitlines() if "chosen" in line] == ["bed", "wardrobe"]
+
+
+def test_cli_errors_are_messages_with_exit_code_2(zoo, model_files, tmp_path):
+    args = ["--zoo", str(zoo.root), "--env", STATE_ID]
+    result = runner.invoke(app, ["priors", "list", *args, "--goal", "xqzt"])
+    assert result.exit_code == 2 and "does not know the word 'xqzt'" in result.output
+    result = runner.invoke(app, ["priors", "show", "sofa", *args])
+    assert result.exit_code == 2 and "no prior for 'sofa'" in result.output
+    result = runner.invoke(app, ["priors", "add", str(model_files / "dqn.zip"), "--goal", "stove", *args])
+    assert result.exit_code == 2 and "discrete action distribution" in result.output
+    result = runner.invoke(app, ["priors", "add", str(tmp_path / "nope.zip"), "--goal", "stove", *args])
+    assert result.exit_code == 2 and "does not exist" in result.output
+    assert "Traceback" not in result.output
+
+
+def test_cli_add_show_eval_remove(zoo, model_files):
+    args = ["--zoo", str(zoo.root), "--env", STATE_ID]
+    result = runner.invoke(app, ["priors", "add", str(model_files / "ppo.zip"), "--goal", "stove", "--episodes", "4", *args])
+    assert result.exit_code == 0, result.output
+    card = zoo.get("stove", STATE_ID).card
+    assert card.evaluation["episodes"] == 4 and 0.0 <= card.evaluation["success_rate"] <= 1.0
+    result = runner.invoke(app, ["priors", "show", "stove", *args])
+    assert result.exit_code == 0 and "stable_baselines3.PPO" in result.output
+    result = runner.invoke(app, ["priors", "eval", "stove", "--episodes", "2", *args])
+    assert result.exit_code == 0 and "over 2 episodes" in result.output
+    result = runner.invoke(app, ["priors", "remove", "stove", *args])
+    assert result.exit_code == 0 and "stove" not in [e.goal for e in zoo.entries()]
+
+
+def test_cli_train_dagger_tiny(tmp_path):
+    result = runner.invoke(app, ["priors", "train", "--goal", "toilet", "--method", "dagger", "--env", STATE_ID,
+                                 "--zoo", str(tmp_path), "--rounds", "2", "--steps-per-round", "200", "--epochs", "1",
+                                 "--episodes", "4"])
+    assert result.exit_code == 0, result.output
+    card = Zoo(tmp_path).get("toilet", STATE_ID).card
+    assert card.training["method"] == "dagger" and card.training["steps"] == 400
+    assert card.command.startswith("dopt ") and card.evaluation["episodes"] == 4
+
+
+def test_similarity_command_and_heatmap(tmp_path):
+    out = tmp_path / "sim.png"
+    result = runner.invoke(app, ["similarity", "shower", "bathtub", "toilet", "--plot", str(out)])
+    assert result.exit_code == 0 and "0.57" in result.output and out.stat().st_size > 1000
