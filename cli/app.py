@@ -31,6 +31,10 @@ def _root(
 
 from sb3_disagree.cli import priors as _priors  # noqa: E402
 
+from sb3_disagree.cli import train as _train  # noqa: E402
+
+app.command("train")(_train.train)
+app.command("eval")(_train.eval_run)
 app.add_typer(_priors.app, name="priors")
 app.command("similarity")(_priors.similarity)
 

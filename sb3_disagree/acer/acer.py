@@ -193,6 +193,15 @@ class ACER(BaseAlgorithm):
                 values[idx] = (th.softmax(logits, -1) * q).sum(-1).cpu().numpy()
         return values
 
+    @staticmethod
+    def _infos_of_current_obs(env: VecEnv, infos: list[dict[str, Any]], dones: np.ndarray) -> list[dict[str, Any]]:
+        """The infos that describe the observations the behaviour sees next: where an episode ended, the
+        env was reset, and its reset info (not the last episode's final info) describes the new observation."""
+        if not dones.any():
+            return infos
+        reset_infos = getattr(env, "reset_infos", None) or [{} for _ in infos]
+        return [reset_infos[i] if done else info for i, (info, done) in enumerate(zip(infos, dones))]
+
     def collect_rollouts(self, env: VecEnv, callback: BaseCallback) -> Optional[Segment]:
         """
         Collect one segment of ``n_steps`` per env with the behaviour policy.
@@ -237,7 +246,7 @@ class ACER(BaseAlgorithm):
                 timeout_buf[step] = self._timeout_values(dones, infos)
             self._last_obs = new_obs  # type: ignore[assignment]
             self._last_episode_starts = dones
-            self._last_infos = infos
+            self._last_infos = self._infos_of_current_obs(env, infos, dones)
 
         observations[self.n_steps] = self._last_obs
         self.last_rollout_tags = None if any(t is None for t in tags_buf) else np.stack(tags_buf)
@@ -351,7 +360,8 @@ class ACER(BaseAlgorithm):
         iteration = 0
         total_timesteps, callback = self._setup_learn(total_timesteps, callback, reset_num_timesteps, tb_log_name, progress_bar)
         if reset_num_timesteps or len(self._last_infos) != self.n_envs:
-            self._last_infos = [{} for _ in range(self.n_envs)]
+            reset_infos = getattr(self.env, "reset_infos", None)
+            self._last_infos = [dict(i) for i in reset_infos] if reset_infos else [{} for _ in range(self.n_envs)]
         self.behaviour_policy.setup(self)
         callback.on_training_start(locals(), globals())
         assert self.env is not None

@@ -1,0 +1,139 @@
+"""``dopt train`` and ``dopt eval``: the method on the command line, with a live display."""
+
+import json
+import time
+from pathlib import Path
+from typing import Optional
+
+import typer
+from rich.live import Live
+from rich.table import Table
+from stable_baselines3.common.callbacks import BaseCallback
+
+from sb3_disagree.cli.common import DEFAULT_ENV, clean_errors, console
+
+
+class LiveDisplay(BaseCallback):
+    """Steps, env steps/s, recent success rate, prior usage and disagreement, refreshed every second."""
+
+    def __init__(self, total: int, live: Live) -> None:
+        super().__init__()
+        self.total, self.live, self.last_draw, self.t0, self.n0 = total, live, 0.0, time.perf_counter(), 0
+
+    def _on_training_start(self) -> None:
+        self.t0, self.n0 = time.perf_counter(), self.model.num_timesteps
+
+    def _on_step(self) -> bool:
+        now = time.perf_counter()
+        if now - self.last_draw >= 1.0:
+            self.last_draw = now
+            self.live.update(self.table(now))
+        return True
+
+    def table(self, now: float) -> Table:
+        m = self.model
+        stats = getattr(m.behaviour, "last", {}) if m.behaviour is not None else {}
+        success = m.ep_success_buffer
+        t = Table(show_header=False, box=None)
+        t.add_row("steps", f"{m.num_timesteps:,} / {self.total:,}")
+        t.add_row("env steps/s", f"{(m.num_timesteps - self.n0) / max(now - self.t0, 1e-9):.0f}")
+        t.add_row("success (last 100 episodes)", f"{sum(success) / len(success):.2f}" if success else "-")
+        t.add_row("prior usage", f"{stats['prior/usage']:.2f}" if "prior/usage" in stats else "-")
+        t.add_row("disagreement", f"{stats['prior/disagreement']:.3f}" if "prior/disagreement" in stats else "-")
+        return t
+
+
+def train(
+    goal: str = typer.Option(..., "--goal", help="The new goal word."),
+    env: str = typer.Option(DEFAULT_ENV, "--env", help="Gymnasium id of the environment."),
+    mode: str = typer.Option("disagreement", "--mode", help="disagreement, room-sensor or scratch."),
+    priors: str = typer.Option("auto", "--priors", help="auto (by similarity), or goals: a,b"),
+    alpha: int = typer.Option(10, "--alpha", help="Disagreement window."),
+    beta: float = typer.Option(0.1, "--beta", help="Follow priors while the window's mean disagreement is below this."),
+    steps: int = typer.Option(100_000, "--steps", help="Env steps."),
+    seed: int = typer.Option(0, "--seed"),
+    n_envs: int = typer.Option(4, "--n-envs"),
+    embedding: Optional[Path] = typer.Option(None, "--embedding", help="Word vectors file (default: MiniLM)."),
+    zoo: Optional[Path] = typer.Option(None, "--zoo", help="Zoo folder (default: the shipped zoo)."),
+    out: Path = typer.Option(Path("runs"), "--out", help="Root folder of the runs."),
+    resume: Optional[Path] = typer.Option(None, "--resume", help="A run folder to continue."),
+) -> None:
+    """Train a policy for a new goal with disagreement options (or the room sensor, or from scratch)."""
+    with clean_errors():
+        from sb3_disagree.training import RunConfig, train as run
+
+        config = RunConfig(goal=goal, env_id=env, mode=mode,
+                           priors="auto" if priors == "auto" else [p.strip() for p in priors.split(",") if p.strip()],
+                           alpha=alpha, beta=beta, steps=steps, seed=seed, n_envs=n_envs,
+                           embedding=str(embedding) if embedding else None, zoo=str(zoo) if zoo else None)
+        if resume is None:
+            config.validate()
+
+        def show_priors(names, sims):
+            console.print("priors: " + ", ".join(f"[bold]{n}[/] (similarity {s:.3f})" for n, s in zip(names, sims)))
+
+        with Live(console=console, refresh_per_second=2, transient=False) as live:
+            display = LiveDisplay(steps, live)
+            run_dir, model, finished = run(config, out, resume=resume, callbacks=[display], on_priors=show_priors)
+            live.update(display.table(time.perf_counter()))
+        if finished:
+            console.print(f"done: {model.num_timesteps:,} steps; wrote {run_dir}")
+        else:
+            console.print(f"[yellow]interrupted[/] at {model.num_timesteps:,} steps; saved the model and replay buffer "
+                          f"in {run_dir}; continue with: dopt train --goal {goal} --resume {run_dir}")
+            raise typer.Exit(code=130)
+
+
+def eval_run(
+    run_or_model: Path = typer.Argument(..., help="A run folder or a model.zip."),
+    episodes: int = typer.Option(100, "--episodes"),
+    deterministic: bool = typer.Option(True, "--deterministic/--stochastic"),
+    seed: int = typer.Option(20_000, "--seed"),
+    trajectory: Optional[Path] = typer.Option(None, "--trajectory", help="Draw the run's recorded episodes (PNG)."),
+    episode: int = typer.Option(-1, "--episode", help="Which recorded episode to draw (-1: the last)."),
+) -> None:
+    """Evaluate the new policy alone (no priors): success rate, episode length, return."""
+    with clean_errors():
+        import yaml
+
+        from sb3_disagree.acer import ACER
+        from sb3_disagree.prior_training import evaluate, make_env
+
+        path = Path(run_or_model)
+        run_dir = path if path.is_dir() else path.parent
+        model_path = path / "model.zip" if path.is_dir() else path
+        if not model_path.exists():
+            raise FileNotFoundError(f"no model at {model_path}")
+        cfg_path = run_dir / "config.yaml"
+        if not cfg_path.exists():
+            raise FileNotFoundError(f"{cfg_path} is missing: it names the environment and goal to evaluate in")
+        cfg = yaml.safe_load(cfg_path.read_text())
+        model = ACER.load(model_path, device="cpu")
+        venv = make_env(cfg["env_id"], cfg["goal"], cfg.get("env_kwargs"), n_envs=4, seed=seed)
+        result = evaluate(model, venv, episodes, deterministic)
+        console.print(f"{cfg['goal']}: success {result.success_rate:.2f}, mean length {result.mean_length:.1f}, "
+                      f"mean return {result.mean_return:.2f} over {episodes} episodes "
+                      f"({'greedy' if deterministic else 'sampled'} actions, no priors)")
+        if trajectory is not None:
+            draw_recorded(run_dir, cfg, trajectory, episode)
+
+
+def draw_recorded(run_dir: Path, cfg: dict, out: Path, episode: int = -1) -> None:
+    """Draw one recorded training episode on the map, each step coloured by whether it followed a prior."""
+    from sb3_disagree.envs.apartment import ApartmentEnv
+    from sb3_disagree.envs.topdown import draw_trajectory
+
+    path = run_dir / "trajectories.jsonl"
+    lines = path.read_text().splitlines() if path.exists() else []
+    if not lines:
+        raise FileNotFoundError(f"{run_dir} has no recorded episodes (trajectories.jsonl)")
+    try:
+        record = json.loads(lines[episode])
+    except IndexError:
+        raise ValueError(f"--episode {episode}: the run recorded {len(lines)} episodes") from None
+    layout = ApartmentEnv(goal=cfg["goal"], obs="state").layout
+    # positions[i] is where step i ended; the segment from i to i + 1 is step i + 1's action.
+    tags = record["tags"][1:]
+    draw_trajectory(layout, record["positions"], tags, goal=cfg["goal"], out=out)
+    console.print(f"wrote {out}: the episode at {record['timesteps']:,} steps, "
+                  f"{'success' if record['success'] else 'no success'}, {tags.count('prior')} of {len(tags)} steps on priors")

@@ -1,0 +1,209 @@
+"""
+One training run of the method: choose priors, build the behaviour, train ACER, write the run folder.
+
+A run folder (``runs/<env>/<goal>/<mode>-<seed>/``) holds ``config.yaml``, ``model.zip``,
+``progress.csv``, TensorBoard events, ``monitor/`` files and ``trajectories.jsonl`` (the recorded
+episodes with their per-step tags). An interrupted run saves the model and the replay buffer; a
+resumed run continues the step count.
+"""
+
+import json
+import os
+from collections.abc import Callable
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any, Optional
+
+import numpy as np
+import yaml
+from stable_baselines3.common.callbacks import BaseCallback, CallbackList
+from stable_baselines3.common.env_util import make_vec_env
+from stable_baselines3.common.logger import configure
+
+from sb3_disagree.acer import ACER
+from sb3_disagree.options import MODES, PriorSet, make_options
+
+DEFAULT_ENV = "sb3_disagree/Apartment-v0"
+# ACER on the apartment: images through NatureCNN; a buffer of 50k frames is 0.7 GB of uint8.
+ACER_KWARGS: dict[str, Any] = dict(n_steps=20, buffer_size=50_000, replay_start=2_000, replay_ratio=4, ent_coef=0.01,
+                                   learning_rate=7e-4)
+
+
+@dataclass
+class RunConfig:
+    """
+    Everything that defines a run; saved as the run's ``config.yaml``.
+
+    :param goal: The new goal word
+    :param env_id: Gymnasium id of the environment
+    :param mode: "disagreement", "room-sensor" or "scratch"
+    :param priors: "auto" (by similarity) or the goal labels of the priors
+    :param alpha: Disagreement window
+    :param beta: Disagreement threshold (>= 0)
+    :param entropy_offset: Entropy offset of the prior branch
+    :param steps: Env steps to train
+    :param seed: Seed
+    :param n_envs: Parallel envs
+    :param embedding: Word vectors file; None for the default
+    :param zoo: Zoo folder; None for the shipped one
+    :param acer_kwargs: ACER's hyperparameters
+    :param env_kwargs: The environment's keyword arguments besides the goal
+    """
+
+    goal: str
+    env_id: str = DEFAULT_ENV
+    mode: str = "disagreement"
+    priors: Any = "auto"
+    alpha: int = 10
+    beta: float = 0.1
+    entropy_offset: float = 0.1
+    steps: int = 100_000
+    seed: int = 0
+    n_envs: int = 4
+    embedding: Optional[str] = None
+    zoo: Optional[str] = None
+    acer_kwargs: dict[str, Any] = field(default_factory=lambda: dict(ACER_KWARGS))
+    env_kwargs: dict[str, Any] = field(default_factory=dict)
+
+    def validate(self) -> None:
+        if self.mode not in MODES:
+            raise ValueError(f"--mode must be one of {', '.join(MODES)}, got {self.mode!r}")
+        if not self.beta >= 0:
+            raise ValueError(f"--beta must be >= 0 (the priors are followed while disagreement is below it), got {self.beta}")
+        if self.alpha < 1:
+            raise ValueError(f"--alpha must be >= 1, got {self.alpha}")
+        if self.steps < 1 or self.n_envs < 1:
+            raise ValueError("--steps and --n-envs must be positive")
+
+    def run_dir(self, out: Path) -> Path:
+        return out / self.env_id.replace("/", "__") / self.goal / f"{self.mode}-{self.seed}"
+
+
+def choose_priors(config: RunConfig, env) -> tuple[list[str], list[float], PriorSet]:
+    """The priors of a run: by similarity from the zoo, or as named; loaded and checked against the env."""
+    from sb3_disagree.language import load_embedding, rank_by_similarity, select_priors
+    from sb3_disagree.zoo import Zoo, ZooError
+
+    zoo = Zoo(config.zoo)
+    labels = zoo.labels(config.env_id)
+    embedding = load_embedding(config.embedding)
+    if config.priors == "auto":
+        chosen = select_priors(config.goal, labels, embedding, k=2)
+    else:
+        names = list(config.priors)
+        if len(names) < 2:
+            raise ValueError(f"--priors needs at least two goals, got {names}")
+        missing = [n for n in names if n not in labels]
+        if missing:
+            raise ZooError(f"the zoo has no usable prior for {', '.join(missing)} in {config.env_id}")
+        sims = dict(rank_by_similarity(config.goal, names, embedding))
+        chosen = [(n, sims.get(n, 1.0)) for n in names]
+    models = [zoo.load(zoo.get(name, config.env_id), env) for name, _ in chosen]
+    return [n for n, _ in chosen], [s for _, s in chosen], PriorSet(models, [n for n, _ in chosen])
+
+
+class RecordTrajectories(BaseCallback):
+    """Write each episode of env 0 as a JSON line: positions after each step, their tags, success."""
+
+    def __init__(self, path: Path, every: int = 1) -> None:
+        super().__init__()
+        self.path, self.every = path, every
+        self.positions: list = []
+        self.tags: list = []
+        self.episodes = 0
+
+    def _on_step(self) -> bool:
+        infos, dones = self.locals["infos"], self.locals["dones"]
+        tags = self.locals.get("tags")
+        info = infos[0]
+        if "position" in info:
+            self.positions.append(list(info["position"]))
+            self.tags.append(str(tags[0]) if tags is not None else "explore")
+        if dones[0]:
+            self.episodes += 1
+            if self.episodes % self.every == 0:
+                self._write(complete=True, success=bool(info.get("is_success", False)))
+            self.positions, self.tags = [], []
+        return True
+
+    def _on_training_end(self) -> None:
+        self._write(complete=False, success=False)  # the episode under way, so a short run still shows its path
+
+    def _write(self, complete: bool, success: bool) -> None:
+        if not self.positions:
+            return
+        record = {"timesteps": self.num_timesteps, "complete": complete, "success": success,
+                  "positions": self.positions, "tags": self.tags}
+        with open(self.path, "a") as f:
+            f.write(json.dumps(record) + "\n")
+
+
+def build_env(config: RunConfig, run_dir: Path):
+    import sb3_disagree.envs  # noqa: F401  (registers the environments)
+
+    return make_vec_env(config.env_id, n_envs=config.n_envs, seed=config.seed, monitor_dir=str(run_dir / "monitor"),
+                        env_kwargs=dict(goal=config.goal, **config.env_kwargs))
+
+
+def train(config: RunConfig, out: Path = Path("runs"), resume: Optional[Path] = None,
+          callbacks: Optional[list[BaseCallback]] = None, on_priors: Optional[Callable[[list, list], None]] = None
+          ) -> tuple[Path, ACER, bool]:
+    """
+    Train a new policy with the method (or from scratch), writing the run folder.
+
+    :param config: The run's configuration (ignored in favour of the saved one when resuming)
+    :param out: Root of the runs
+    :param resume: A run folder to continue
+    :param callbacks: Extra SB3 callbacks (the CLI's live display)
+    :param on_priors: Called with the chosen priors and their similarities
+    :return: The run folder, the model, and whether training finished (False when interrupted)
+    """
+    if resume is not None:
+        run_dir = Path(resume)
+        if not (run_dir / "config.yaml").exists() or not (run_dir / "model.zip").exists():
+            raise FileNotFoundError(f"{run_dir} is not a run folder with config.yaml and model.zip to resume")
+        saved = yaml.safe_load((run_dir / "config.yaml").read_text())
+        config = RunConfig(**{k: v for k, v in saved.items() if k in RunConfig.__dataclass_fields__})
+    config.validate()
+    run_dir = resume or config.run_dir(Path(out))
+    run_dir.mkdir(parents=True, exist_ok=True)
+    env = build_env(config, run_dir)
+    behaviour, prior_names, sims = None, [], []
+    if config.mode != "scratch":
+        prior_names, sims, priors = choose_priors(config, env)
+        if on_priors:
+            on_priors(prior_names, sims)
+        behaviour = make_options(config.mode, priors, config.alpha, config.beta, config.entropy_offset, seed=config.seed)
+    saved_config = dict(asdict(config), chosen_priors=prior_names, similarities=sims)
+    if resume is not None:
+        model = ACER.load(run_dir / "model.zip", env=env, behaviour=behaviour)
+        if (run_dir / "replay_buffer.pkl").exists():
+            model.load_replay_buffer(run_dir / "replay_buffer.pkl")
+        remaining = max(config.steps - model.num_timesteps, 0)
+    else:
+        policy = "CnnPolicy" if len(env.observation_space.shape) == 3 else "MlpPolicy"
+        model = ACER(policy, env, seed=config.seed, behaviour=behaviour, **config.acer_kwargs)
+        remaining = config.steps
+        (run_dir / "config.yaml").write_text(yaml.safe_dump(saved_config, sort_keys=False))
+    model.set_logger(configure(str(run_dir), ["csv", "tensorboard"]))
+    trajectories = RecordTrajectories(run_dir / "trajectories.jsonl")
+    finished = True
+    try:
+        model.learn(remaining, callback=CallbackList([trajectories, *(callbacks or [])]), log_interval=10,
+                    reset_num_timesteps=resume is None)
+    except KeyboardInterrupt:
+        finished = False
+    model.save(run_dir / "model.zip")
+    if not finished:
+        model.save_replay_buffer(run_dir / "replay_buffer.pkl")
+    elif (run_dir / "replay_buffer.pkl").exists():
+        os.remove(run_dir / "replay_buffer.pkl")
+    saved_config.update(num_timesteps=int(model.num_timesteps), finished=finished)
+    (run_dir / "config.yaml").write_text(yaml.safe_dump(saved_config, sort_keys=False))
+    env.close()
+    return run_dir, model, finished
+
+
+def success_rate(model: ACER) -> float:
+    buf = model.ep_success_buffer
+    return float(np.mean(buf)) if buf else float("nan")

@@ -1,0 +1,165 @@
+"""Disagreement options and the room sensor: gate direction, window, entropy branch, mu, batching."""
+
+import math
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+import torch as th
+
+from sb3_disagree.options import DisagreementOptions, RoomSensorOptions, disagreement, entropy, kl
+
+A = 3
+
+
+class FakePriors:
+    """Priors whose distributions the test sets for every call: a (k, E, A) tensor or a function of the step."""
+
+    def __init__(self, probs):
+        self.fn = probs if callable(probs) else (lambda step: probs)
+        self.step = 0
+
+    def __len__(self):
+        return 2
+
+    def to(self, device):
+        return self
+
+    def probs(self, observations):
+        self.step += 1
+        return self.fn(self.step - 1)
+
+
+def _setup(behaviour, n_envs):
+    behaviour.setup(SimpleNamespace(n_envs=n_envs, device=th.device("cpu")))
+    return behaviour
+
+
+AGREE = th.tensor([[0.8, 0.1, 0.1], [0.7, 0.2, 0.1]])
+DISAGREE = th.tensor([[0.9, 0.05, 0.05], [0.05, 0.05, 0.9]])
+UNIFORM = th.full((1, A), 1 / A)
+
+
+def _priors(rows, n_envs):
+    return th.stack([rows[0].expand(n_envs, A), rows[1].expand(n_envs, A)])
+
+
+def _run(behaviour, pi, n_envs, steps, infos=None):
+    out = []
+    starts = np.ones(n_envs, dtype=bool)
+    for _ in range(steps):
+        out.append(behaviour(None, pi.expand(n_envs, A), infos or [{}] * n_envs, starts))
+        starts = np.zeros(n_envs, dtype=bool)
+    return out
+
+
+def test_disagreement_score_is_the_min_of_both_kls():
+    p, q = th.tensor([0.7, 0.2, 0.1]), th.tensor([0.2, 0.5, 0.3])
+    expected = min(sum(p[i] * math.log(p[i] / q[i]) for i in range(3)), sum(q[i] * math.log(q[i] / p[i]) for i in range(3)))
+    assert disagreement(th.stack([p, q]).unsqueeze(1)).item() == pytest.approx(float(expected), rel=1e-5)
+    three = th.stack([p, q, p]).unsqueeze(1)
+    d_pq = disagreement(th.stack([p, q]).unsqueeze(1)).item()
+    assert disagreement(three).item() == pytest.approx((d_pq + d_pq + 0.0) / 3, rel=1e-5)  # mean over pairs
+    assert entropy(UNIFORM).item() == pytest.approx(math.log(3), rel=1e-6)
+    assert kl(p, p).item() == pytest.approx(0.0, abs=1e-6)
+
+
+def test_beta_zero_never_follows_and_huge_beta_always_follows_in_the_branch():
+    n = 64
+    never = _setup(DisagreementOptions(FakePriors(_priors(AGREE, n)), alpha=3, beta=0.0, seed=0), n)
+    steps = _run(never, UNIFORM, n, 20)
+    assert all((s.tags == "explore").all() for s in steps)
+    always = _setup(DisagreementOptions(FakePriors(_priors(DISAGREE, n)), alpha=3, beta=1e9, entropy_offset=-10, seed=0), n)
+    steps = _run(always, UNIFORM, n, 20)
+    assert all((s.tags == "prior").all() for s in steps)  # the branch is always entered with offset -10
+
+
+def test_gate_follows_while_below_beta_and_the_window_mean():
+    d_agree = disagreement(_priors(AGREE, 1)).item()
+    d_disagree = disagreement(_priors(DISAGREE, 1)).item()
+    beta = (d_agree + d_disagree) / 2
+    # Scores: 3 agreeing steps, then disagreeing ones; window alpha = 4, branch always entered.
+    seq = [AGREE] * 3 + [DISAGREE] * 5
+    b = _setup(DisagreementOptions(FakePriors(lambda t: _priors(seq[t], 1)), alpha=4, beta=beta, entropy_offset=-10,
+                                   seed=0), 1)
+    follows, means = [], []
+    for t in range(len(seq)):
+        s = b(None, UNIFORM, [{}], np.array([t == 0]))
+        follows.append(s.tags[0] == "prior")
+        means.append(b.window_mean()[0])
+    window = []
+    for t, rows in enumerate(seq):
+        window = (window + [d_agree if rows is AGREE else d_disagree])[-4:]
+        assert means[t] == pytest.approx(np.mean(window), rel=1e-5)
+        assert follows[t] == (np.mean(window) < beta)
+    assert follows[:4] == [True, True, True, True] and not follows[-1]
+
+
+def test_window_is_cleared_at_episode_start_and_counts_only_branch_steps():
+    b = _setup(DisagreementOptions(FakePriors(_priors(DISAGREE, 2)), alpha=5, beta=0.1, entropy_offset=-10, seed=0), 2)
+    _run(b, UNIFORM, 2, 3)
+    assert (b.count == 3).all()
+    b(None, UNIFORM.expand(2, A), [{}, {}], np.array([True, False]))
+    assert b.count.tolist() == [1, 4]
+    # Outside the branch (offset above the entropy) nothing is added.
+    b.entropy_offset = 10
+    b(None, UNIFORM.expand(2, A), [{}, {}], np.array([False, False]))
+    assert b.count.tolist() == [1, 4]
+
+
+def test_entropy_branch_frequency_matches_its_formula():
+    n = 4000
+    pi = th.tensor([[0.85, 0.1, 0.05]])
+    h = entropy(pi).item()
+    b = _setup(DisagreementOptions(FakePriors(_priors(AGREE, n)), beta=1e9, seed=1), n)
+    steps = _run(b, pi, n, 5)
+    freq = np.mean([(s.tags == "prior").mean() for s in steps])
+    assert freq == pytest.approx(h - 0.1, abs=0.015)
+
+
+def test_mu_is_the_exact_mixture_and_sums_to_one():
+    n = 5
+    pi = th.tensor([[0.6, 0.3, 0.1]])
+    h = entropy(pi).item()
+    prior_probs = th.softmax(th.randn(2, n, A, generator=th.Generator().manual_seed(0)), -1)
+    for beta, gate in ((1e9, 1.0), (0.0, 0.0)):
+        b = _setup(DisagreementOptions(FakePriors(prior_probs), beta=beta, seed=0), n)
+        step = _run(b, pi, n, 1)[0]
+        q = min(max(h - 0.1, 0.0), 1.0) * gate
+        expected = q * prior_probs.mean(0) + (1 - q) * pi.expand(n, A)
+        assert th.allclose(step.mu, expected, atol=1e-6)
+        assert th.allclose(step.mu.sum(-1), th.ones(n), atol=1e-6)
+        assert (step.mu.gather(1, step.actions.view(-1, 1)) > 0).all()
+
+
+def test_batched_and_per_env_agree():
+    n, steps = 6, 12
+    g = th.Generator().manual_seed(3)
+    seq = [th.softmax(2 * th.randn(2, n, A, generator=g), -1) for _ in range(steps)]
+    starts = [np.array([t == 0 or (t == 5 and e % 2 == 0) for e in range(n)]) for t in range(steps)]
+    pi = th.tensor([[0.5, 0.3, 0.2]])
+    batched = _setup(DisagreementOptions(FakePriors(lambda t: seq[t]), alpha=4, beta=0.4, entropy_offset=-10), n)
+    out_b = [batched(None, pi.expand(n, A), [{}] * n, starts[t]) for t in range(steps)]
+    for e in range(n):
+        single = _setup(DisagreementOptions(FakePriors(lambda t: seq[t][:, e:e + 1]), alpha=4, beta=0.4,
+                                            entropy_offset=-10), 1)
+        for t in range(steps):
+            s = single(None, pi, [{}], starts[t][e:e + 1])
+            assert th.allclose(s.mu[0], out_b[t].mu[e], atol=1e-6) and s.tags[0] == out_b[t].tags[e]
+
+
+def test_room_sensor_follows_only_outside_the_goal_room():
+    n = 4
+    b = _setup(RoomSensorOptions(FakePriors(_priors(DISAGREE, n)), entropy_offset=-10, seed=0), n)
+    infos = [{"room": "corridor", "goal_room": "bathroom"}, {"room": "bathroom", "goal_room": "bathroom"},
+             {"room": "kitchen", "goal_room": "bathroom"}, {}]
+    step = b(None, UNIFORM.expand(n, A), infos, np.zeros(n, dtype=bool))
+    assert step.tags.tolist() == ["prior", "explore", "prior", "prior"]
+    assert th.allclose(step.mu[1], UNIFORM[0]) and not th.allclose(step.mu[0], UNIFORM[0])
+
+
+def test_parameters_out_of_range_are_refused():
+    with pytest.raises(ValueError, match="beta"):
+        DisagreementOptions(FakePriors(_priors(AGREE, 1)), beta=-0.1)
+    with pytest.raises(ValueError, match="alpha"):
+        DisagreementOptions(FakePriors(_priors(AGREE, 1)), alpha=0)

@@ -1,0 +1,113 @@
+"""`dopt train` and `dopt eval` end to end on the state apartment with tiny budgets; interruption and resume."""
+
+import pytest
+import yaml
+from stable_baselines3.common.callbacks import BaseCallback
+from stable_baselines3.common.env_util import make_vec_env
+from stable_baselines3.common.evaluation import evaluate_policy
+from typer.testing import CliRunner
+
+import sb3_disagree.envs  # noqa: F401
+from sb3_disagree import ACER
+from sb3_disagree.cli.app import app
+from sb3_disagree.training import RunConfig, train
+
+STATE_ID = "sb3_disagree/ApartmentState-v0"
+runner = CliRunner()
+
+
+@pytest.fixture(scope="module")
+def zoo(tmp_path_factory):
+    root = tmp_path_factory.mktemp("zoo")
+    for goal in ("shower", "toilet", "bed"):
+        r = runner.invoke(app, ["priors", "train", "--goal", goal, "--env", STATE_ID, "--zoo", str(root), "--rounds", "1",
+                                "--steps-per-round", "200", "--epochs", "1", "--episodes", "2"])
+        assert r.exit_code == 0, r.output
+    return root
+
+
+def _train_args(zoo, out, *extra):
+    return ["train", "--goal", "bathtub", "--env", STATE_ID, "--zoo", str(zoo), "--out", str(out), "--steps", "400",
+            "--n-envs", "2", *extra]
+
+
+@pytest.mark.parametrize("mode", ["disagreement", "room-sensor", "scratch"])
+def test_train_writes_the_run_folder(zoo, tmp_path, mode):
+    result = runner.invoke(app, _train_args(zoo, tmp_path, "--mode", mode))
+    assert result.exit_code == 0, result.output
+    run = tmp_path / "sb3_disagree__ApartmentState-v0" / "bathtub" / f"{mode}-0"
+    for name in ["model.zip", "config.yaml", "progress.csv", "trajectories.jsonl"]:
+        assert (run / name).exists(), name
+    assert list((run / "monitor").glob("*.monitor.csv")) and list(run.glob("events.out.tfevents*"))
+    cfg = yaml.safe_load((run / "config.yaml").read_text())
+    assert cfg["finished"] and cfg["num_timesteps"] >= 400
+    if mode != "scratch":
+        assert "priors: shower" in result.output and cfg["chosen_priors"] == ["shower", "toilet"]
+        header = (run / "progress.csv").read_text().splitlines()[0]
+        assert "prior/usage" in header and "behaviour/" in header
+        assert ("prior/disagreement" in header) == (mode == "disagreement")
+    # The trained model opens with plain SB3 tools, no priors or zoo needed.
+    model = ACER.load(run / "model.zip")
+    env = make_vec_env(STATE_ID, n_envs=1, env_kwargs=dict(goal="bathtub"))
+    evaluate_policy(model, env, n_eval_episodes=1)
+
+
+def test_eval_and_trajectory_picture(zoo, tmp_path):
+    assert runner.invoke(app, _train_args(zoo, tmp_path)).exit_code == 0
+    run = tmp_path / "sb3_disagree__ApartmentState-v0" / "bathtub" / "disagreement-0"
+    png = tmp_path / "traj.png"
+    result = runner.invoke(app, ["eval", str(run), "--episodes", "3", "--trajectory", str(png)])
+    assert result.exit_code == 0, result.output
+    assert "over 3 episodes" in result.output and png.stat().st_size > 10_000
+    result = runner.invoke(app, ["eval", str(run / "model.zip"), "--episodes", "2", "--stochastic"])
+    assert result.exit_code == 0, result.output
+
+
+class StopAt(BaseCallback):
+    def __init__(self, at):
+        super().__init__()
+        self.at = at
+
+    def _on_step(self):
+        if self.num_timesteps >= self.at:
+            raise KeyboardInterrupt
+        return True
+
+
+def test_interrupt_saves_and_resume_continues_the_step_count(zoo, tmp_path):
+    config = RunConfig(goal="bathtub", env_id=STATE_ID, steps=600, n_envs=2, zoo=str(zoo))
+    run, model, finished = train(config, tmp_path, callbacks=[StopAt(200)])
+    assert not finished and (run / "replay_buffer.pkl").exists() and (run / "model.zip").exists()
+    stopped_at = model.num_timesteps
+    assert 200 <= stopped_at < 600
+    result = runner.invoke(app, ["train", "--goal", "bathtub", "--resume", str(run)])
+    assert result.exit_code == 0, result.output
+    cfg = yaml.safe_load((run / "config.yaml").read_text())
+    assert cfg["finished"] and cfg["num_timesteps"] >= 600
+    assert ACER.load(run / "model.zip").num_timesteps == cfg["num_timesteps"]
+    assert not (run / "replay_buffer.pkl").exists()
+
+
+@pytest.mark.parametrize("extra,message", [
+    (["--beta", "-0.5"], "--beta must be >= 0"),
+    (["--mode", "greedy"], "--mode must be one of"),
+    (["--priors", "shower"], "at least two"),
+    (["--priors", "shower,sofa"], "no usable prior for sofa"),
+])
+def test_bad_input_is_a_message_and_exit_code_2(zoo, tmp_path, extra, message):
+    result = runner.invoke(app, _train_args(zoo, tmp_path, *extra))
+    assert result.exit_code == 2 and message in result.output, result.output
+
+
+def test_unknown_goal_word_and_too_few_priors(zoo, tmp_path):
+    result = runner.invoke(app, ["train", "--goal", "xqzt", "--env", STATE_ID, "--zoo", str(zoo), "--out", str(tmp_path)])
+    assert result.exit_code == 2 and "unknown goal object 'xqzt'" in result.output
+    lonely = tmp_path / "lonely"
+    (lonely / "sb3_disagree__ApartmentState-v0").mkdir(parents=True)
+    import shutil
+
+    shutil.copytree(zoo / "sb3_disagree__ApartmentState-v0" / "shower", lonely / "sb3_disagree__ApartmentState-v0" / "shower")
+    result = runner.invoke(app, ["train", "--goal", "bathtub", "--env", STATE_ID, "--zoo", str(lonely), "--out", str(tmp_path)])
+    assert result.exit_code == 2 and "2 priors are needed" in result.output
+    result = runner.invoke(app, ["train", "--goal", "bathtub", "--resume", str(tmp_path / "nothing")])
+    assert result.exit_code == 2 and "not a run folder" in result.output
