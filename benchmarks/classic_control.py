@@ -3,6 +3,7 @@ ACER against SB3's A2C, PPO and DQN on CartPole-v1 and Acrobot-v1, same step bud
 
     python benchmarks/classic_control.py run --seeds 0 1 2 3 4 --jobs 2
     python benchmarks/classic_control.py report          # writes docs/benchmarks.md's classic-control part
+    python benchmarks/classic_control.py throughput      # ACER's cost per env step against A2C and PPO
 
 Hyperparameters come from benchmarks/hyperparams/<algo>.yml (rl-zoo3's format); every algorithm runs
 for the same budget per env (BUDGETS) whatever its file says. Each run evaluates the deterministic
@@ -164,6 +165,34 @@ def cmd_report(args: argparse.Namespace) -> None:
     print(table)
 
 
+def cmd_throughput(args: argparse.Namespace) -> None:
+    """Wall-clock cost per env step of ACER, A2C and PPO, one after another in one process, same conditions."""
+    import torch as th
+    from stable_baselines3.common.env_util import make_vec_env
+
+    th.set_num_threads(1)
+    rows = []
+    for env_id in args.envs:
+        for algo in ("acer", "a2c", "ppo"):
+            kwargs = load_hyperparams(algo, env_id)
+            kwargs.pop("n_timesteps", None)
+            n_envs, policy = kwargs.pop("n_envs", 1), kwargs.pop("policy")
+            model = algo_class(algo)(policy, make_vec_env(env_id, n_envs=n_envs, seed=0), seed=0, **kwargs)
+            model.learn(2_000)  # warm-up (ACER's replay starts after 1 000 transitions)
+            start = time.perf_counter()
+            model.learn(args.steps, reset_num_timesteps=False)
+            seconds = time.perf_counter() - start
+            rows.append(f"| {env_id} | {algo.upper()} | {n_envs} | {args.steps / seconds:.0f} | "
+                        f"{1e6 * seconds / args.steps:.0f} |")
+            print(rows[-1], flush=True)
+    body = (f"Command: `python benchmarks/classic_control.py throughput --steps {args.steps}`: each algorithm with its "
+            "tuned hyperparameters (`benchmarks/hyperparams/`), one torch thread, one after another in one process, "
+            f"{args.steps} env steps after a 2 000-step warm-up, learning included.\n\n"
+            "| env | algorithm | n_envs | env steps/s | microseconds per env step |\n|---|---|---|---|---|\n"
+            + "\n".join(rows) + "\n")
+    write_section("classic-throughput", "ACER's wall-clock cost per env step against A2C and PPO", body)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     sub = parser.add_subparsers(dest="cmd", required=True)
@@ -175,8 +204,11 @@ def main() -> None:
     run.add_argument("--force", action="store_true", help="rerun cells that already have a result")
     for p in (run, sub.add_parser("report")):
         p.add_argument("--eval-freq", type=int, default=5_000)
+    throughput = sub.add_parser("throughput")
+    throughput.add_argument("--steps", type=int, default=20_000)
+    throughput.add_argument("--envs", nargs="+", default=list(ENVS), choices=list(ENVS))
     args = parser.parse_args()
-    {"run": cmd_run, "report": cmd_report}[args.cmd](args)
+    {"run": cmd_run, "report": cmd_report, "throughput": cmd_throughput}[args.cmd](args)
 
 
 if __name__ == "__main__":

@@ -11,6 +11,7 @@ import pstats
 import time
 
 import torch as th
+from docs_section import write_section
 from stable_baselines3.common.env_util import make_vec_env
 
 from sb3_disagree import ACER
@@ -20,6 +21,7 @@ def main() -> None:
     parser = argparse.ArgumentParser()
     parser.add_argument("--steps", type=int, default=20_000)
     parser.add_argument("--top", type=int, default=25)
+    parser.add_argument("--write", action="store_true", help="write the table into docs/benchmarks.md")
     args = parser.parse_args()
     th.set_num_threads(1)
     model = ACER("MlpPolicy", make_vec_env("CartPole-v1", n_envs=8, seed=0), seed=0, ent_coef=0.0)
@@ -39,11 +41,15 @@ def main() -> None:
     for (filename, _, name), (_, ncalls, _, cumtime, _) in stats.stats.items():
         if name in parts and (parts[name] is None or cumtime > parts[name][1]):
             parts[name] = (ncalls, cumtime)
-    print(f"{args.steps} env steps in {wall:.2f} s under the profiler ({args.steps / wall:.0f} steps/s)")
-    print("function | calls | cumulative s | share of profiled time")
-    for name, value in parts.items():
-        if value:
-            print(f"{name} | {value[0]} | {value[1]:.2f} | {100 * value[1] / total:.0f}%")
+    rows = [f"| `{name}` | {value[0]} | {value[1]:.2f} | {100 * value[1] / total:.0f}% |"
+            for name, value in parts.items() if value]
+    body = (f"Command: `python benchmarks/profile_acer.py --steps {args.steps}` (ACER MlpPolicy, CartPole-v1, 8 envs, "
+            f"one torch thread, cProfile). {args.steps} env steps in {wall:.2f} s under the profiler "
+            f"({args.steps / wall:.0f} steps/s). Cumulative time of the parts of an iteration:\n\n"
+            "| function | calls | cumulative s | share |\n|---|---|---|---|\n" + "\n".join(rows) + "\n")
+    if args.write:
+        write_section("acer-profile", "Where ACER's time goes", body)
+    print(body)
     stats.sort_stats("tottime").print_stats(args.top)
 
 
