@@ -38,7 +38,7 @@ def main() -> None:
     parts = {"collect_rollouts": None, "_update": None, "retrace_targets": None, "trust_region_project": None,
              "policy_terms": None, "step": None, "_checked_behaviour_step": None, "action_probs": None,
              "backward": None, "clip_grad_norm_": None, "update_average": None, "sample": None}
-    for (filename, _, name), (_, ncalls, _, cumtime, _) in stats.stats.items():
+    for (_, _, name), (_, ncalls, _, cumtime, _) in stats.stats.items():
         if name in parts and (parts[name] is None or cumtime > parts[name][1]):
             parts[name] = (ncalls, cumtime)
     rows = [f"| `{name}` | {value[0]} | {value[1]:.2f} | {100 * value[1] / total:.0f}% |"

@@ -28,7 +28,7 @@ def main() -> None:
     body = (
         "Read from the cards by `python benchmarks/zoo_table.py`. Success: the prior alone from "
         "random corridor starts, actions sampled from its distribution as the method follows priors, "
-        f"over the episodes on the card (seeds 10000+). Each card keeps the command that made the prior.\n\n"
+        "over the episodes on the card (seeds 10000+). Each card keeps the command that made the prior.\n\n"
         "| goal | env | method | labelled steps | success | mean length | size | status |\n"
         "|---|---|---|---|---|---|---|---|\n" + "\n".join(rows) + f"\n\nTotal size: {total / 1e6:.1f} MB.\n"
     )
