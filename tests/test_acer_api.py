@@ -108,3 +108,12 @@ def test_learns_the_chain_with_a_fixed_seed():
     eval_env = make_vec_env(lambda: __import__("gymnasium").wrappers.TimeLimit(ChainEnv(6, 3), 20), n_envs=1)
     mean, _ = evaluate_policy(model, eval_env, n_eval_episodes=5, deterministic=True)
     assert mean == 1.0
+
+
+def test_progress_bar_and_tensorboard_run_name(tmp_path):
+    model = ACER("MlpPolicy", make_vec_env(ChainEnv, n_envs=2, seed=0), n_steps=5, tensorboard_log=str(tmp_path))
+    model.learn(40, progress_bar=True, tb_log_name="chain", log_interval=1)
+    model.learn(20, tb_log_name="chain", reset_num_timesteps=False, log_interval=1)
+    runs = sorted(p.name for p in tmp_path.iterdir())
+    assert runs == ["chain_1"] and list((tmp_path / "chain_1").glob("events.out.tfevents*"))
+    assert model.num_timesteps == 60
