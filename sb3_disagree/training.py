@@ -142,7 +142,8 @@ def build_env(config: RunConfig, run_dir: Path):
     import sb3_disagree.envs  # noqa: F401  (registers the environments)
 
     return make_vec_env(config.env_id, n_envs=config.n_envs, seed=config.seed, monitor_dir=str(run_dir / "monitor"),
-                        env_kwargs=dict(goal=config.goal, **config.env_kwargs))
+                        env_kwargs=dict(goal=config.goal, **config.env_kwargs),
+                        monitor_kwargs=dict(info_keywords=("is_success",)))
 
 
 def train(config: RunConfig, out: Path = Path("runs"), resume: Optional[Path] = None,

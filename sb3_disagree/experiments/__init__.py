@@ -1,0 +1,1 @@
+"""Multi-seed experiments: training curves from run folders, aggregation and plots."""

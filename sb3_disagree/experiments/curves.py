@@ -1,0 +1,66 @@
+"""Training curves read back from run folders (SB3 Monitor files and progress.csv)."""
+
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Optional
+
+import numpy as np
+import pandas as pd
+
+
+def success_curve(run_dir: Path, grid: np.ndarray, window: int = 50) -> np.ndarray:
+    """
+    Training success rate against env steps: the success of the last ``window`` episodes (over all
+    envs) that had ended by each step of ``grid``; nan before the first episode ends.
+
+    :param run_dir: A run folder with ``monitor/*.monitor.csv`` (written with ``is_success``)
+    :param grid: Env steps (over all envs) at which to read the curve
+    :param window: Episodes in the moving window
+    """
+    frames = []
+    files = sorted((run_dir / "monitor").glob("*.monitor.csv"))
+    for f in files:
+        df = pd.read_csv(f, skiprows=1)
+        # An env's own step count at each episode end, times the number of envs: the total steps then.
+        df["steps"] = df["l"].cumsum() * len(files)
+        frames.append(df[["steps", "is_success"]])
+    if not frames:
+        return np.full(len(grid), np.nan)
+    episodes = pd.concat(frames).sort_values("steps")
+    steps = episodes["steps"].to_numpy()
+    success = episodes["is_success"].astype(float).to_numpy()
+    out = np.full(len(grid), np.nan)
+    for i, g in enumerate(grid):
+        n = np.searchsorted(steps, g, side="right")
+        if n:
+            out[i] = success[max(0, n - window):n].mean()
+    return out
+
+
+def progress_curve(run_dir: Path, key: str, grid: np.ndarray) -> np.ndarray:
+    """A logged value (e.g. ``prior/usage``) against env steps, from ``progress.csv``, held between dumps."""
+    df = pd.read_csv(run_dir / "progress.csv")
+    if key not in df or "time/total_timesteps" not in df:
+        return np.full(len(grid), np.nan)
+    df = df[["time/total_timesteps", key]].dropna()
+    steps, values = df["time/total_timesteps"].to_numpy(), df[key].to_numpy()
+    idx = np.searchsorted(steps, grid, side="right") - 1
+    return np.where(idx >= 0, values[np.clip(idx, 0, None)], np.nan)
+
+
+def mean_and_band(curves: Sequence[np.ndarray]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Mean over seeds and a 95% band (t-interval of the mean; the range for a single seed)."""
+    from scipy import stats
+
+    c = np.array(curves, dtype=float)
+    mean = np.nanmean(c, axis=0)
+    n = np.sum(~np.isnan(c), axis=0)
+    sem = np.nanstd(c, axis=0, ddof=1) / np.sqrt(np.maximum(n, 1)) if len(c) > 1 else np.zeros_like(mean)
+    half = np.where(n > 1, stats.t.ppf(0.975, np.maximum(n - 1, 1)) * sem, 0.0)
+    return mean, mean - half, mean + half
+
+
+def steps_to(curve: np.ndarray, grid: np.ndarray, level: float) -> Optional[float]:
+    """The first grid step where the curve reaches ``level``, or None."""
+    hit = np.flatnonzero(np.nan_to_num(curve, nan=-1) >= level)
+    return float(grid[hit[0]]) if len(hit) else None
