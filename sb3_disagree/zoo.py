@@ -273,6 +273,7 @@ class Zoo:
         )
         target.parent.mkdir(parents=True, exist_ok=True)
         tmp = Path(tempfile.mkdtemp(prefix=f".{goal}-", dir=target.parent))
+        os.chmod(tmp, 0o755)  # mkdtemp's private mode would hide the entry from other users of a shared zoo
         try:
             shutil.copyfile(model_path, tmp / MODEL)
             (tmp / CARD).write_text(json.dumps(asdict(card), indent=2) + "\n")
