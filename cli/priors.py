@@ -48,15 +48,17 @@ def list_priors(
             sims = dict(ranked)
             chosen = {label for label, _ in [r for r in ranked if r[0] in usable][:k]}
             entries.sort(key=lambda e: -sims.get(e.goal, 2.0))
-        table = Table(title=f"priors for {goal!r}" if goal else "prior zoo")
+        envs = sorted({e.env_id for e in entries})
+        table = Table(title=(f"priors for {goal!r}" if goal else "prior zoo") + (f" in {envs[0]}" if len(envs) == 1 else ""))
         table.add_column("goal", no_wrap=True)
-        table.add_column("env", overflow="fold")
+        if len(envs) > 1:
+            table.add_column("env", overflow="fold")
         for col in ["algorithm", "method", "steps", "success", *(["similarity", ""] if goal else []), "status"]:
             table.add_column(col, no_wrap=col in ("similarity", ""))
         for e in entries:
             card = e.card
             success = card.evaluation.get("success_rate") if card else None
-            row = [e.goal, e.env_id, card.sb3_class.rsplit(".", 1)[-1] if card else "?",
+            row = [e.goal, *([e.env_id] if len(envs) > 1 else []), card.sb3_class.rsplit(".", 1)[-1] if card else "?",
                    str(card.training.get("method", "?")) if card else "?", str(card.training.get("steps", "?")) if card else "?",
                    f"{success:.2f}" if success is not None else "-"]
             if goal:
