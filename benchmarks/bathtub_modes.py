@@ -56,7 +56,7 @@ def cmd_report(args: argparse.Namespace) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from sb3_disagree.experiments.curves import mean_and_band, progress_curve, steps_to, success_curve
+    from sb3_disagree.experiments.curves import first_defined, mean_and_band, progress_curve, steps_to, success_curve
 
     grid = np.linspace(args.steps / 50, args.steps, 50)
     fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(11, 4))
@@ -70,21 +70,21 @@ def cmd_report(args: argparse.Namespace) -> None:
         curves = [success_curve(r, grid) for r in runs]
         mean, lo, hi = mean_and_band(curves)
         ax1.plot(grid, mean, color=COLORS[mode], label=f"{mode} ({len(runs)} seeds)")
-        ax1.fill_between(grid, lo, hi, color=COLORS[mode], alpha=0.2)
+        ax1.fill_between(grid, np.clip(lo, 0, 1), np.clip(hi, 0, 1), color=COLORS[mode], alpha=0.2)
         if mode != "scratch":
-            usage = mean_and_band([progress_curve(r, "prior/usage", grid) for r in runs])
+            usage = mean_and_band([progress_curve(r, "prior/usage", grid, smooth=5) for r in runs])
             ax2.plot(grid, usage[0], color=COLORS[mode], label=mode)
-            ax2.fill_between(grid, usage[1], usage[2], color=COLORS[mode], alpha=0.2)
+            ax2.fill_between(grid, np.clip(usage[1], 0, 1), np.clip(usage[2], 0, 1), color=COLORS[mode], alpha=0.2)
         fps = [float(__import__("pandas").read_csv(r / "progress.csv")["time/fps"].dropna().iloc[-1]) for r in runs]
         speeds[mode] = np.mean(fps)
         s50, s90 = steps_to(mean, grid, 0.5), steps_to(mean, grid, 0.9)
-        rows.append(f"| {mode} | {len(runs)} | {mean[0]:.2f} | {np.nanmean(mean[-5:]):.2f} | "
+        rows.append(f"| {mode} | {len(runs)} | {first_defined(mean):.2f} | {np.nanmean(mean[-5:]):.2f} | "
                     f"{f'{s50 / 1000:.0f}k' if s50 else 'not reached'} | {f'{s90 / 1000:.0f}k' if s90 else 'not reached'} | "
                     f"{speeds[mode]:.0f} |")
     ax1.set(xlabel="env steps", ylabel="training success rate (last 50 episodes)", ylim=(-0.02, 1.02),
             title="bathtub, priors shower + toilet")
     ax2.set(xlabel="env steps", ylabel="share of steps following the priors", ylim=(-0.02, 1.02),
-            title="prior usage")
+            title="prior usage (moving average of 5 logged rollouts)")
     ax1.legend(loc="lower right")
     ax2.legend(loc="upper right")
     fig.tight_layout()
@@ -107,8 +107,9 @@ at a time, one torch thread each. Apartment RGB 60x80, 4 envs, ACER CnnPolicy wi
 |---|---|---|---|---|---|---|
 {chr(10).join(rows)}
 
-Success is the training success rate over the last 50 episodes (all envs), the behaviour included
-(priors where they were followed); the band is a 95% t-interval of the mean over seeds.{overhead}
+Success is the training success rate over the last 50 episodes (all envs; defined from the 10th
+episode on), the behaviour included (priors where they were followed); the band is a 95% t-interval of
+the mean over seeds.{overhead}
 """
     write_section("bathtub-modes", "Bathtub: disagreement options, room sensor and scratch", body, page="results.md")
     print(body)

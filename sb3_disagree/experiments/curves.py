@@ -8,10 +8,10 @@ import numpy as np
 import pandas as pd
 
 
-def success_curve(run_dir: Path, grid: np.ndarray, window: int = 50) -> np.ndarray:
+def success_curve(run_dir: Path, grid: np.ndarray, window: int = 50, min_episodes: int = 10) -> np.ndarray:
     """
     Training success rate against env steps: the success of the last ``window`` episodes (over all
-    envs) that had ended by each step of ``grid``; nan before the first episode ends.
+    envs) that had ended by each step of ``grid``; nan until ``min_episodes`` episodes have ended.
 
     :param run_dir: A run folder with ``monitor/*.monitor.csv`` (written with ``is_success``)
     :param grid: Env steps (over all envs) at which to read the curve
@@ -32,18 +32,23 @@ def success_curve(run_dir: Path, grid: np.ndarray, window: int = 50) -> np.ndarr
     out = np.full(len(grid), np.nan)
     for i, g in enumerate(grid):
         n = np.searchsorted(steps, g, side="right")
-        if n:
+        if n >= min_episodes:
             out[i] = success[max(0, n - window):n].mean()
     return out
 
 
-def progress_curve(run_dir: Path, key: str, grid: np.ndarray) -> np.ndarray:
-    """A logged value (e.g. ``prior/usage``) against env steps, from ``progress.csv``, held between dumps."""
+def progress_curve(run_dir: Path, key: str, grid: np.ndarray, smooth: int = 1) -> np.ndarray:
+    """
+    A logged value (e.g. ``prior/usage``) against env steps, from ``progress.csv``, held between dumps.
+
+    :param smooth: Moving average over this many dumps (each dump holds one rollout's value)
+    """
     df = pd.read_csv(run_dir / "progress.csv")
     if key not in df or "time/total_timesteps" not in df:
         return np.full(len(grid), np.nan)
     df = df[["time/total_timesteps", key]].dropna()
-    steps, values = df["time/total_timesteps"].to_numpy(), df[key].to_numpy()
+    steps = df["time/total_timesteps"].to_numpy()
+    values = df[key].rolling(smooth, min_periods=1).mean().to_numpy()
     idx = np.searchsorted(steps, grid, side="right") - 1
     return np.where(idx >= 0, values[np.clip(idx, 0, None)], np.nan)
 
@@ -58,6 +63,11 @@ def mean_and_band(curves: Sequence[np.ndarray]) -> tuple[np.ndarray, np.ndarray,
     sem = np.nanstd(c, axis=0, ddof=1) / np.sqrt(np.maximum(n, 1)) if len(c) > 1 else np.zeros_like(mean)
     half = np.where(n > 1, stats.t.ppf(0.975, np.maximum(n - 1, 1)) * sem, 0.0)
     return mean, mean - half, mean + half
+
+
+def first_defined(curve: np.ndarray) -> float:
+    defined = curve[~np.isnan(curve)]
+    return float(defined[0]) if len(defined) else float("nan")
 
 
 def steps_to(curve: np.ndarray, grid: np.ndarray, level: float) -> Optional[float]:
