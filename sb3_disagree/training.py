@@ -14,7 +14,6 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any, Optional
 
-import numpy as np
 import yaml
 from stable_baselines3.common.callbacks import BaseCallback, CallbackList
 from stable_baselines3.common.env_util import make_vec_env
@@ -99,7 +98,7 @@ def choose_priors(config: RunConfig, env) -> tuple[list[str], list[float], Prior
         sims = dict(rank_by_similarity(config.goal, names, embedding))
         chosen = [(n, sims.get(n, 1.0)) for n in names]
     models = [zoo.load(zoo.get(name, config.env_id), env) for name, _ in chosen]
-    return [n for n, _ in chosen], [s for _, s in chosen], PriorSet(models, [n for n, _ in chosen])
+    return [n for n, _ in chosen], [s for _, s in chosen], PriorSet(models)
 
 
 class RecordTrajectories(BaseCallback):
@@ -204,7 +203,3 @@ def train(config: RunConfig, out: Path = Path("runs"), resume: Optional[Path] = 
     env.close()
     return run_dir, model, finished
 
-
-def success_rate(model: ACER) -> float:
-    buf = model.ep_success_buffer
-    return float(np.mean(buf)) if buf else float("nan")

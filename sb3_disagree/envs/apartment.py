@@ -17,7 +17,6 @@ from gymnasium import spaces
 from sb3_disagree.envs.layout import CORRIDOR, Layout, default_layout
 
 TURN_LEFT, TURN_RIGHT, MOVE_FORWARD = 0, 1, 2
-ACTION_NAMES = ("turn_left", "turn_right", "move_forward")
 
 
 class ApartmentEnv(gym.Env):
@@ -183,4 +182,4 @@ def _wrap(angle: float) -> float:
     return (angle + math.pi) % (2 * math.pi) - math.pi
 
 
-__all__ = ["ACTION_NAMES", "CORRIDOR", "MOVE_FORWARD", "TURN_LEFT", "TURN_RIGHT", "ApartmentEnv"]
+__all__ = ["CORRIDOR", "MOVE_FORWARD", "TURN_LEFT", "TURN_RIGHT", "ApartmentEnv"]

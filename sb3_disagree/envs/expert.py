@@ -98,11 +98,6 @@ class DistanceField:
         fx, fz = self.point(fi, fj)
         return float(self.dist[fi, fj]) + math.hypot(fx - x, fz - z)
 
-    def geodesic(self, x: float, z: float) -> float:
-        """Shortest free-space distance from (x, z) to the goal region, in metres."""
-        i, j = self.nearest_free(x, z)
-        return float(self.dist[i, j])
-
 
 def _blocked_grid(layout: Layout, gx: np.ndarray, gz: np.ndarray, radius: float) -> np.ndarray:
     """Cells whose circle of ``radius`` touches a wall segment or an object's bounding circle."""

@@ -108,9 +108,6 @@ class Layout:
     def object_names(self) -> tuple[str, ...]:
         return tuple(o.name for o in self.objects)
 
-    def doorway(self, room: str) -> Doorway:
-        return next(d for d in self.doorways if d.room == room)
-
     def room_at(self, x: float, z: float) -> str:
         """The room containing (x, z); a doorway's passage counts as the corridor."""
         for r in self.rooms:

@@ -12,14 +12,12 @@ class PriorSet:
     The action distributions of k frozen priors for a batch of observations.
 
     :param priors: SB3 models whose policies have ``get_distribution`` (ACER, PPO, A2C, ...)
-    :param names: A label per prior, for logs
     """
 
-    def __init__(self, priors: Sequence[BaseAlgorithm], names: Sequence[str] = ()) -> None:
+    def __init__(self, priors: Sequence[BaseAlgorithm]) -> None:
         if len(priors) < 2:
             raise ValueError(f"disagreement needs at least two priors, got {len(priors)}")
         self.priors = list(priors)
-        self.names = list(names) or [f"prior{i}" for i in range(len(priors))]
         for prior in self.priors:
             prior.policy.set_training_mode(False)
             prior.policy.requires_grad_(False)
