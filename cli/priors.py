@@ -142,6 +142,8 @@ def train(
     rounds: int = typer.Option(6, "--rounds", help="DAgger rounds."),
     steps_per_round: int = typer.Option(3_000, "--steps-per-round", help="Labelled steps per DAgger round."),
     epochs: int = typer.Option(6, "--epochs", help="DAgger passes over the data per round."),
+    final_epochs: int = typer.Option(0, "--final-epochs", help="DAgger passes over all labels at the end, "
+                                     "learning rate decayed to zero."),
     n_envs: int = typer.Option(4, "--n-envs"),
     seed: int = typer.Option(0, "--seed"),
     episodes: int = typer.Option(100, "--episodes", help="Evaluation episodes for the card."),
@@ -164,7 +166,7 @@ def train(
             with _progress() as progress:
                 task = progress.add_task(f"DAgger {goal}", total=rounds)
                 model, record = train_dagger(venv, seed=seed, rounds=rounds, steps_per_round=steps_per_round,
-                                             epochs=epochs,
+                                             epochs=epochs, final_epochs=final_epochs,
                                              progress=lambda line: (progress.advance(task), console.print(line)))
         else:
             model, record = train_rl(venv, method, steps, seed=seed, progress_bar=True)

@@ -55,6 +55,9 @@ def train(
     n_envs: int = typer.Option(4, "--n-envs"),
     embedding: Optional[Path] = typer.Option(None, "--embedding", help="Word vectors file (default: MiniLM)."),
     zoo: Optional[Path] = typer.Option(None, "--zoo", help="Zoo folder (default: the shipped zoo)."),
+    eval_every: int = typer.Option(0, "--eval-every", help="Evaluate the new policy alone every this many env "
+                                   "steps (0: never); logged as eval/success_rate."),
+    eval_episodes: int = typer.Option(20, "--eval-episodes", help="Episodes per evaluation."),
     out: Path = typer.Option(Path("runs"), "--out", help="Root folder of the runs."),
     resume: Optional[Path] = typer.Option(None, "--resume", help="A run folder to continue."),
 ) -> None:
@@ -65,6 +68,7 @@ def train(
         config = RunConfig(goal=goal, env_id=env, mode=mode,
                            priors="auto" if priors == "auto" else [p.strip() for p in priors.split(",") if p.strip()],
                            alpha=alpha, beta=beta, steps=steps, seed=seed, n_envs=n_envs,
+                           eval_every=eval_every, eval_episodes=eval_episodes,
                            embedding=str(embedding) if embedding else None, zoo=str(zoo) if zoo else None)
         if resume is None:
             config.validate()
@@ -76,6 +80,12 @@ def train(
             display = LiveDisplay(steps, live)
             run_dir, model, finished = run(config, out, resume=resume, callbacks=[display], on_priors=show_priors)
             live.update(display.table(time.perf_counter()))
+        if (run_dir / "evaluations.npz").exists():
+            import numpy as np
+
+            evals = np.load(run_dir / "evaluations.npz")
+            console.print("the new policy alone (success): " + ", ".join(
+                f"{t:,} steps {np.mean(s):.2f}" for t, s in zip(evals["timesteps"], evals["successes"])))
         if finished:
             console.print(f"done: {model.num_timesteps:,} steps; wrote {run_dir}")
         else:

@@ -92,6 +92,7 @@ def train_dagger(
     batch_size: int = 128,
     learning_rate: float = 1e-3,
     max_episode_steps: int = 200,
+    final_epochs: int = 0,
     progress: Optional[Callable[[str], None]] = None,
 ) -> tuple[ACER, dict[str, Any]]:
     """
@@ -107,6 +108,8 @@ def train_dagger(
     :param batch_size: Minibatch size
     :param learning_rate: Adam's learning rate
     :param max_episode_steps: Rollouts restart after this many steps (a stuck learner teaches little more)
+    :param final_epochs: Extra passes over the final aggregate with the learning rate decayed to zero
+        (the per-round fits stop short of fitting the labels; these close the gap)
     :param progress: Called with a line of text after each round
     :return: An ACER model whose policy imitates the expert, and a record of the training
     """
@@ -144,10 +147,18 @@ def train_dagger(
         loss, accuracy = _fit(policy, optimizer, x, y, epochs, batch_size, rng)
         if progress:
             progress(f"round {r + 1}/{rounds}: {len(y)} labels, loss {loss:.3f}, accuracy {accuracy:.3f}")
+    if final_epochs > 0:
+        schedule = th.optim.lr_scheduler.CosineAnnealingLR(optimizer, T_max=final_epochs)
+        for _ in range(final_epochs):
+            loss, accuracy = _fit(policy, optimizer, x, y, 1, batch_size, rng)
+            schedule.step()
+        if progress:
+            progress(f"final {final_epochs} epochs: loss {loss:.3f}, accuracy {accuracy:.3f}")
     # The average network starts where the imitated policy is, so that ACER fine-tuning begins consistent.
     policy.average_net.load_state_dict(policy.net.state_dict())
     model.num_timesteps = int(len(y))
     record = {"method": "dagger", "steps": int(len(y)), "seed": seed, "rounds": rounds, "epochs": epochs,
+              "final_epochs": final_epochs,
               "final_loss": loss, "final_accuracy": accuracy, "seconds": round(time.perf_counter() - start, 1)}
     return model, record
 

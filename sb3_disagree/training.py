@@ -15,7 +15,7 @@ from pathlib import Path
 from typing import Any, Optional
 
 import yaml
-from stable_baselines3.common.callbacks import BaseCallback, CallbackList
+from stable_baselines3.common.callbacks import BaseCallback, CallbackList, EvalCallback
 from stable_baselines3.common.env_util import make_vec_env
 from stable_baselines3.common.logger import configure
 
@@ -47,6 +47,9 @@ class RunConfig:
     :param zoo: Zoo folder; None for the shipped one
     :param acer_kwargs: ACER's hyperparameters
     :param env_kwargs: The environment's keyword arguments besides the goal
+    :param eval_every: Evaluate the new policy alone (no priors, sampled actions) every this many env
+        steps, logged as ``eval/success_rate`` and kept in ``evaluations.npz``; 0 never
+    :param eval_episodes: Episodes per evaluation
     """
 
     goal: str
@@ -63,6 +66,8 @@ class RunConfig:
     zoo: Optional[str] = None
     acer_kwargs: dict[str, Any] = field(default_factory=lambda: dict(ACER_KWARGS))
     env_kwargs: dict[str, Any] = field(default_factory=dict)
+    eval_every: int = 0
+    eval_episodes: int = 20
 
     def validate(self) -> None:
         if self.mode not in MODES:
@@ -73,6 +78,8 @@ class RunConfig:
             raise ValueError(f"--alpha must be >= 1, got {self.alpha}")
         if self.steps < 1 or self.n_envs < 1:
             raise ValueError("--steps and --n-envs must be positive")
+        if self.eval_every < 0 or self.eval_episodes < 1:
+            raise ValueError("--eval-every must be >= 0 and --eval-episodes positive")
 
     def run_dir(self, out: Path) -> Path:
         return out / self.env_id.replace("/", "__") / self.goal / f"{self.mode}-{self.seed}"
@@ -137,12 +144,26 @@ class RecordTrajectories(BaseCallback):
             f.write(json.dumps(record) + "\n")
 
 
-def build_env(config: RunConfig, run_dir: Path):
+def build_env(config: RunConfig, run_dir: Optional[Path], n_envs: Optional[int] = None, seed: Optional[int] = None):
     import sb3_disagree.envs  # noqa: F401  (registers the environments)
 
-    return make_vec_env(config.env_id, n_envs=config.n_envs, seed=config.seed, monitor_dir=str(run_dir / "monitor"),
+    return make_vec_env(config.env_id, n_envs=n_envs or config.n_envs, seed=config.seed if seed is None else seed,
+                        monitor_dir=str(run_dir / "monitor") if run_dir else None,
                         env_kwargs=dict(goal=config.goal, **config.env_kwargs),
                         monitor_kwargs=dict(info_keywords=("is_success",)))
+
+
+def evaluation_callback(config: RunConfig, run_dir: Path) -> EvalCallback:
+    """The new policy alone on its own envs (other seeds), sampled actions, every ``eval_every`` steps."""
+    from stable_baselines3.common.preprocessing import is_image_space, is_image_space_channels_first
+    from stable_baselines3.common.vec_env import VecTransposeImage
+
+    eval_env = build_env(config, None, n_envs=min(config.n_envs, 4), seed=config.seed + 10_000)
+    space = eval_env.observation_space
+    if is_image_space(space) and not is_image_space_channels_first(space):
+        eval_env = VecTransposeImage(eval_env)  # as ACER wraps the training env
+    return EvalCallback(eval_env, n_eval_episodes=config.eval_episodes, eval_freq=max(config.eval_every // config.n_envs, 1),
+                        log_path=str(run_dir), deterministic=False, verbose=0)
 
 
 def train(config: RunConfig, out: Path = Path("runs"), resume: Optional[Path] = None,
@@ -186,10 +207,12 @@ def train(config: RunConfig, out: Path = Path("runs"), resume: Optional[Path] = 
         remaining = config.steps
         (run_dir / "config.yaml").write_text(yaml.safe_dump(saved_config, sort_keys=False))
     model.set_logger(configure(str(run_dir), ["csv", "tensorboard"]))
-    trajectories = RecordTrajectories(run_dir / "trajectories.jsonl")
+    own = [RecordTrajectories(run_dir / "trajectories.jsonl")]
+    if config.eval_every:
+        own.append(evaluation_callback(config, run_dir))
     finished = True
     try:
-        model.learn(remaining, callback=CallbackList([trajectories, *(callbacks or [])]), log_interval=10,
+        model.learn(remaining, callback=CallbackList([*own, *(callbacks or [])]), log_interval=10,
                     reset_num_timesteps=resume is None)
     except KeyboardInterrupt:
         finished = False

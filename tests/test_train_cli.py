@@ -52,6 +52,18 @@ def test_train_writes_the_run_folder(zoo, tmp_path, mode):
     evaluate_policy(model, env, n_eval_episodes=1)
 
 
+def test_periodic_evaluation_of_the_policy_alone(zoo, tmp_path):
+    import numpy as np
+
+    result = runner.invoke(app, _train_args(zoo, tmp_path, "--eval-every", "200", "--eval-episodes", "2"))
+    assert result.exit_code == 0, result.output
+    run = tmp_path / "sb3_disagree__ApartmentState-v0" / "bathtub" / "disagreement-0"
+    evals = np.load(run / "evaluations.npz")
+    assert list(evals["timesteps"]) == [200, 400] and evals["successes"].shape == (2, 2)
+    assert "eval/success_rate" in (run / "progress.csv").read_text().splitlines()[0]
+    assert "the new policy alone" in result.output
+
+
 def test_eval_and_trajectory_picture(zoo, tmp_path):
     assert runner.invoke(app, _train_args(zoo, tmp_path)).exit_code == 0
     run = tmp_path / "sb3_disagree__ApartmentState-v0" / "bathtub" / "disagreement-0"
