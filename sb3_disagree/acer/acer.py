@@ -45,6 +45,9 @@ class ACER(BaseAlgorithm):
         (0 gives on-policy ACER)
     :param replay_start: Number of stored transitions (over all envs) before replay updates begin
     :param q_coef: Weight of the Q-value loss
+    :param q_loss: "mse" (the paper's squared error) or "huber" (smooth L1, whose gradient per sample is
+        bounded by 1: a large reward arriving late no longer swamps a shared image encoder)
+    :param reward_scale: Rewards are multiplied by this in the targets (Q is learned in scaled units)
     :param ent_coef: Weight of the entropy bonus
     :param max_grad_norm: Clip of the global gradient norm
     :param c: Truncation of the importance weights in the policy gradient (bias correction beyond it)
@@ -80,6 +83,8 @@ class ACER(BaseAlgorithm):
         replay_ratio: float = 4.0,
         replay_start: int = 1_000,
         q_coef: float = 0.5,
+        q_loss: str = "mse",
+        reward_scale: float = 1.0,
         ent_coef: float = 0.01,
         max_grad_norm: float = 10.0,
         c: float = 10.0,
@@ -113,7 +118,11 @@ class ACER(BaseAlgorithm):
         self.buffer_size = buffer_size
         self.replay_ratio = replay_ratio
         self.replay_start = replay_start
+        if q_loss not in ("mse", "huber"):
+            raise ValueError(f"q_loss must be 'mse' or 'huber', got {q_loss!r}")
         self.q_coef = q_coef
+        self.q_loss = q_loss
+        self.reward_scale = reward_scale
         self.ent_coef = ent_coef
         self.max_grad_norm = max_grad_norm
         self.c = c
@@ -278,7 +287,7 @@ class ACER(BaseAlgorithm):
             rho = probs / (mu + EPS)
             rho_taken = rho.gather(1, actions.unsqueeze(1)).squeeze(1)
             q_ret = retrace_targets(
-                rewards + self.gamma * timeout_values,
+                self.reward_scale * rewards + self.gamma * timeout_values,
                 dones,
                 q_taken.detach().view(n_steps, n_envs),
                 values.view(n_steps, n_envs),
@@ -286,7 +295,10 @@ class ACER(BaseAlgorithm):
                 values_all[n:],
                 self.gamma,
             ).reshape(n)
-        q_loss = 0.5 * (q_ret - q_taken).pow(2).mean()
+        if self.q_loss == "huber":
+            q_loss = th.nn.functional.smooth_l1_loss(q_taken, q_ret)
+        else:
+            q_loss = 0.5 * (q_ret - q_taken).pow(2).mean()
 
         # The policy objective as a function of the probability vector f, where the trust region acts.
         f = probs.detach().requires_grad_(True)
