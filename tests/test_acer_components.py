@@ -148,3 +148,38 @@ def test_time_limit_truncation_is_bootstrapped_and_termination_is_not():
     buf = model.replay_buffer
     assert buf.dones[0, :, 0].tolist() == [0, 1, 0, 1]  # terminations at the right end
     assert (buf.timeout_values[0] == 0).all()
+
+
+@pytest.mark.parametrize("scale,q_loss", [(0.1, "mse"), (1.0, "huber")])
+def test_reward_scale_enters_the_targets_and_q_loss_is_as_named(monkeypatch, scale, q_loss):
+    import sb3_disagree.acer.acer as acer_module
+
+    seen = {}
+    real = acer_module.retrace_targets
+
+    def spy(rewards, *args):
+        seen["rewards"], seen["q_ret"] = rewards.clone(), real(rewards, *args)
+        return seen["q_ret"]
+
+    monkeypatch.setattr(acer_module, "retrace_targets", spy)
+    model = ACER("MlpPolicy", make_vec_env(lambda: ChainEnv(length=3), n_envs=2), n_steps=3, reward_scale=scale,
+                 q_loss=q_loss, seed=0)
+    rng = np.random.default_rng(0)
+    obs = np.eye(3, dtype=np.float32)[rng.integers(0, 3, size=(4, 2))]
+    segment = Segment(observations=obs, actions=rng.integers(0, 2, size=(3, 2)),
+                      rewards=np.full((3, 2), 5.0, dtype=np.float32), dones=np.zeros((3, 2), dtype=np.float32),
+                      timeout_values=np.zeros((3, 2), dtype=np.float32), mu=np.full((3, 2, 2), 0.5, dtype=np.float32))
+    with th.no_grad():
+        _, q = model.policy.logits_and_q(th.as_tensor(obs[:3].reshape(6, 3)))
+        q_taken = q.gather(1, th.as_tensor(segment.actions.reshape(6, 1))).squeeze(1)
+    stats = model._update(segment)
+    assert th.allclose(seen["rewards"], th.full((3, 2), 5.0 * scale))
+    err = seen["q_ret"].reshape(6) - q_taken
+    expected = th.where(err.abs() < 1, 0.5 * err**2, err.abs() - 0.5) if q_loss == "huber" else 0.5 * err**2
+    assert (err.abs() > 1).any() == (q_loss == "huber")  # the huber case reaches its linear part
+    assert stats["value_loss"] == pytest.approx(expected.mean().item(), rel=1e-5)
+
+
+def test_unknown_q_loss_is_refused():
+    with pytest.raises(ValueError, match="q_loss"):
+        ACER("MlpPolicy", make_vec_env(lambda: ChainEnv(length=3), n_envs=1), q_loss="l1")
