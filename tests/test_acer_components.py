@@ -176,7 +176,8 @@ def test_reward_scale_enters_the_targets_and_q_loss_is_as_named(monkeypatch, sca
     assert th.allclose(seen["rewards"], th.full((3, 2), 5.0 * scale))
     err = seen["q_ret"].reshape(6) - q_taken
     expected = th.where(err.abs() < 1, 0.5 * err**2, err.abs() - 0.5) if q_loss == "huber" else 0.5 * err**2
-    assert (err.abs() > 1).any() == (q_loss == "huber")  # the huber case reaches its linear part
+    if q_loss == "huber":
+        assert (err.abs() > 1).any()  # the linear part is reached, so huber and mse differ here
     assert stats["value_loss"] == pytest.approx(expected.mean().item(), rel=1e-5)
 
 
