@@ -29,6 +29,7 @@ def _root(
     """Disagreement Options on Stable-Baselines3."""
 
 
+from sb3_disagree.cli import experiment as _experiment  # noqa: E402
 from sb3_disagree.cli import priors as _priors  # noqa: E402
 
 from sb3_disagree.cli import train as _train  # noqa: E402
@@ -37,6 +38,7 @@ app.command("train")(_train.train)
 app.command("eval")(_train.eval_run)
 app.add_typer(_priors.app, name="priors")
 app.command("similarity")(_priors.similarity)
+app.add_typer(_experiment.app, name="experiment")
 
 
 def main() -> None:

@@ -43,7 +43,10 @@ def progress_curve(run_dir: Path, key: str, grid: np.ndarray, smooth: int = 1) -
 
     :param smooth: Moving average over this many dumps (each dump holds one rollout's value)
     """
-    df = pd.read_csv(run_dir / "progress.csv")
+    try:
+        df = pd.read_csv(run_dir / "progress.csv")
+    except (FileNotFoundError, pd.errors.EmptyDataError):  # a run shorter than one log interval
+        return np.full(len(grid), np.nan)
     if key not in df or "time/total_timesteps" not in df:
         return np.full(len(grid), np.nan)
     df = df[["time/total_timesteps", key]].dropna()
@@ -57,8 +60,12 @@ def mean_and_band(curves: Sequence[np.ndarray]) -> tuple[np.ndarray, np.ndarray,
     """Mean over seeds and a 95% band (t-interval of the mean; the range for a single seed)."""
     from scipy import stats
 
+    import warnings
+
     c = np.array(curves, dtype=float)
-    mean = np.nanmean(c, axis=0)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # steps where no seed has a value yet stay nan
+        mean = np.nanmean(c, axis=0)
     n = np.sum(~np.isnan(c), axis=0)
     sem = np.nanstd(c, axis=0, ddof=1) / np.sqrt(np.maximum(n, 1)) if len(c) > 1 else np.zeros_like(mean)
     half = np.where(n > 1, stats.t.ppf(0.975, np.maximum(n - 1, 1)) * sem, 0.0)

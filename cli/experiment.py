@@ -1,0 +1,90 @@
+"""``dopt experiment ...``: run a named grid of runs and report on it."""
+
+from pathlib import Path
+from typing import Optional
+
+import typer
+from rich.table import Table
+
+from sb3_disagree.cli.common import clean_errors, console
+
+app = typer.Typer(help="Named experiments: grids of runs with curves and a table over seeds.", no_args_is_help=True)
+
+OUT_OPT = typer.Option(None, "--out", help="Results folder (default: benchmarks/results/experiments/NAME).")
+DEFAULT_ROOT = Path("benchmarks") / "results" / "experiments"
+
+
+def _root(name: str, out: Optional[Path]) -> Path:
+    return out if out is not None else DEFAULT_ROOT / name
+
+
+@app.command("list")
+def list_experiments() -> None:
+    """The experiments shipped in benchmarks/experiments/."""
+    from sb3_disagree.experiments.spec import SHIPPED, load_experiment
+
+    t = Table("name", "goal", "cells", "seeds", "steps")
+    for path in sorted(SHIPPED.glob("*.yaml")):
+        e = load_experiment(str(path))
+        t.add_row(e.name, e.goal, ", ".join(e.cells), str(len(e.seeds)), f"{e.steps:,}")
+    console.print(t)
+
+
+@app.command("run")
+def run(
+    name: str = typer.Argument(..., help="A shipped experiment's name, or a YAML file."),
+    backend: str = typer.Option("local", "--backend", help="local (a process pool) or ray."),
+    jobs: Optional[int] = typer.Option(None, "--jobs", help="Runs at a time on the local backend (default: cores)."),
+    address: Optional[str] = typer.Option(None, "--address", help="Ray cluster address (default: a local Ray)."),
+    seeds: Optional[str] = typer.Option(None, "--seeds", help="Only these of the experiment's seeds: 0,1,2"),
+    cells: Optional[str] = typer.Option(None, "--cells", help="Only these cells: a,b"),
+    out: Optional[Path] = OUT_OPT,
+) -> None:
+    """Run every cell and seed of an experiment; finished runs are skipped."""
+    with clean_errors():
+        from sb3_disagree.experiments.runner import run_experiment
+        from sb3_disagree.experiments.spec import load_experiment
+
+        experiment = load_experiment(name)
+        experiment.restrict(seeds=[int(s) for s in seeds.split(",")] if seeds else None,
+                            cells=[c.strip() for c in cells.split(",")] if cells else None)
+        root = _root(experiment.name, out)
+        runs = experiment.runs()
+        todo = [r for r in runs if not r.finished(root)]
+        console.print(f"{experiment.name}: {len(runs)} runs, {len(runs) - len(todo)} finished, {len(todo)} to do "
+                      f"({backend}) -> {root}")
+
+        def show(result: dict) -> None:
+            console.print(f"  {result['cell']} seed {result['seed']}: {result['steps']:,} steps in "
+                          f"{result['seconds']:.0f} s; the new policy alone {result['final_alone']['success_rate']:.2f}")
+
+        run_experiment(experiment, root, backend=backend, jobs=jobs, address=address, on_result=show)
+
+
+@app.command("report")
+def report(
+    name: str = typer.Argument(..., help="A shipped experiment's name, or a YAML file."),
+    out: Optional[Path] = OUT_OPT,
+    figure: Optional[Path] = typer.Option(None, "--figure", help="Also write the figure here (PNG)."),
+) -> None:
+    """Curves (mean and 95% band over seeds) and the table; writes report.md and a PNG in the results folder."""
+    with clean_errors():
+        import shutil
+
+        from sb3_disagree.experiments.report import plot, summarize, table_markdown
+        from sb3_disagree.experiments.spec import load_experiment
+
+        experiment = load_experiment(name)
+        root = _root(experiment.name, out)
+        grid, summaries = summarize(experiment, root)
+        if not summaries:
+            raise FileNotFoundError(f"no finished runs of {experiment.name} in {root}; run: dopt experiment run {name}")
+        png = root / f"{experiment.name}.png"
+        plot(experiment, grid, summaries, png, root)
+        markdown = table_markdown(experiment, summaries)
+        (root / "report.md").write_text(f"# {experiment.name}\n\n![{experiment.name}]({png.name})\n\n{markdown}\n")
+        if figure is not None:
+            figure.parent.mkdir(parents=True, exist_ok=True)
+            shutil.copyfile(png, figure)
+        console.print(markdown)
+        console.print(f"wrote {root / 'report.md'} and {png}")

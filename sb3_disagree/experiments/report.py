@@ -1,0 +1,136 @@
+"""
+Aggregating an experiment: curves with a 95% band over seeds, and a table per cell of steps to 50% and
+90% training success, success at fixed budgets, the normalised area under the curve, and the final
+success of the new policy alone (no priors).
+"""
+
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Optional
+
+import numpy as np
+
+from sb3_disagree.experiments.curves import mean_and_band, progress_curve, steps_to, success_curve
+from sb3_disagree.experiments.spec import RESULT, Experiment
+
+GRID_POINTS = 50
+
+
+@dataclass
+class CellSummary:
+    """What the report says about one cell, over its finished seeds."""
+
+    cell: str
+    seeds: list[int]
+    mean: np.ndarray
+    low: np.ndarray
+    high: np.ndarray
+    usage: np.ndarray
+    steps_to_50: Optional[float]
+    steps_to_90: Optional[float]
+    at_budgets: dict[int, float]
+    auc: float
+    final_alone: float
+    final_alone_seeds: list[float]
+    fps: float
+    records: list[dict] = field(default_factory=list)
+
+
+def summarize(experiment: Experiment, root: Path) -> tuple[np.ndarray, list[CellSummary]]:
+    """Read every finished run of the experiment under ``root`` and summarise each cell."""
+    grid = np.linspace(experiment.steps / GRID_POINTS, experiment.steps, GRID_POINTS)
+    summaries = []
+    for cell in experiment.cells:
+        runs = [r for r in experiment.runs() if r.cell == cell and r.finished(root)]
+        if not runs:
+            continue
+        folders = [r.folder(root) for r in runs]
+        records = [json.loads((f / RESULT).read_text()) for f in folders]
+        curves = [success_curve(f, grid) for f in folders]
+        mean, low, high = mean_and_band(curves)
+        usage = np.full(len(grid), np.nan)
+        if runs[0].config.mode != "scratch":
+            usage_curves = np.array([progress_curve(f, "prior/usage", grid, smooth=5) for f in folders])
+            if not np.isnan(usage_curves).all():
+                usage = np.nanmean(usage_curves, axis=0)
+        at = {}
+        for b in experiment.budgets:
+            i = int(np.searchsorted(grid, b, side="right")) - 1
+            at[b] = float(mean[i]) if i >= 0 else float("nan")
+        alone = [r["final_alone"]["success_rate"] for r in records]
+        summaries.append(CellSummary(
+            cell=cell, seeds=[r.seed for r in runs], mean=mean, low=low, high=high, usage=usage,
+            steps_to_50=steps_to(mean, grid, 0.5), steps_to_90=steps_to(mean, grid, 0.9), at_budgets=at,
+            auc=float(np.mean(np.nan_to_num(mean, nan=0.0))), final_alone=float(np.mean(alone)),
+            final_alone_seeds=alone, fps=float(np.mean([r["fps"] for r in records])), records=records))
+    return grid, summaries
+
+
+def _steps(value: Optional[float]) -> str:
+    return f"{value / 1000:g}k" if value is not None else "not reached"
+
+
+def table_markdown(experiment: Experiment, summaries: list[CellSummary]) -> str:
+    """The report's table as Markdown."""
+    budgets = "".join(f" success at {_steps(b)} |" for b in experiment.budgets)
+    lines = [f"| cell | seeds | steps to 50% | steps to 90% |{budgets} AUC | new policy alone (final) | env steps/s |",
+             "|---" * (7 + len(experiment.budgets)) + "|"]
+    for s in summaries:
+        at = "".join(f" {s.at_budgets[b]:.2f} |" for b in experiment.budgets)
+        lines.append(f"| {s.cell} | {len(s.seeds)} | {_steps(s.steps_to_50)} | {_steps(s.steps_to_90)} |{at} "
+                     f"{s.auc:.2f} | {s.final_alone:.2f} ({', '.join(f'{a:.2f}' for a in s.final_alone_seeds)}) | "
+                     f"{s.fps:.0f} |")
+    return "\n".join(lines)
+
+
+def plot(experiment: Experiment, grid: np.ndarray, summaries: list[CellSummary], out: Path, root: Path) -> None:
+    """Training success (mean and 95% band) and prior usage against env steps; recorded paths if asked."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    n_paths = len(summaries) if experiment.trajectories else 0
+    fig, axes = plt.subplots(1, 2 + n_paths, figsize=(5.5 * (2 + n_paths), 4.2), squeeze=False)
+    ax1, ax2 = axes[0, 0], axes[0, 1]
+    colors = plt.get_cmap("tab10")
+    for i, s in enumerate(summaries):
+        ax1.plot(grid, s.mean, color=colors(i), label=f"{s.cell} ({len(s.seeds)} seeds)")
+        ax1.fill_between(grid, np.clip(s.low, 0, 1), np.clip(s.high, 0, 1), color=colors(i), alpha=0.2)
+        if not np.all(np.isnan(s.usage)):
+            ax2.plot(grid, s.usage, color=colors(i), label=s.cell)
+    priors = experiment.priors if isinstance(experiment.priors, str) else " + ".join(experiment.priors)
+    ax1.set(xlabel="env steps", ylabel="training success rate (last 50 episodes)", ylim=(-0.02, 1.02),
+            title=f"{experiment.name}: {experiment.goal}, priors {priors}")
+    ax2.set(xlabel="env steps", ylabel="share of steps following the priors", ylim=(-0.02, 1.02),
+            title="prior usage (mean over seeds)")
+    ax1.legend(loc="lower right", fontsize=8)
+    if ax2.lines:
+        ax2.legend(loc="upper right", fontsize=8)
+    for j, s in enumerate(summaries[:n_paths]):
+        _draw_path(axes[0, 2 + j], experiment, root / s.cell / f"seed-{s.seeds[0]}", s.cell)
+    fig.tight_layout()
+    out.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(out, dpi=100)
+    plt.close(fig)
+
+
+def _draw_path(ax, experiment: Experiment, run_dir: Path, title: str) -> None:
+    """The last complete recorded episode of a run, on the apartment's map, green where priors led."""
+    from sb3_disagree.envs.apartment import ApartmentEnv
+    from sb3_disagree.envs.topdown import draw_trajectory
+
+    lines = (run_dir / "trajectories.jsonl").read_text().splitlines() if (run_dir / "trajectories.jsonl").exists() else []
+    records = [json.loads(line) for line in lines]
+    complete = [r for r in records if r["complete"]] or records
+    ax.axis("off")
+    if not complete or not experiment.env_id.startswith("sb3_disagree/Apartment"):
+        ax.set_title(f"{title}: no recorded episode")
+        return
+    record = complete[-1]
+    layout = ApartmentEnv(goal=experiment.goal, obs="state").layout
+    ax.imshow(draw_trajectory(layout, record["positions"], record["tags"][1:], goal=experiment.goal))
+    tags = record["tags"][1:]
+    ax.set_title(f"{title}: episode at {record['timesteps'] // 1000}k steps, "
+                 f"{tags.count('prior')}/{len(tags)} on priors", fontsize=9)

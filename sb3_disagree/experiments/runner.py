@@ -1,0 +1,123 @@
+"""
+Running an experiment's grid: a local process pool (default) or Ray tasks on a cluster.
+
+A run is finished when its ``result.json`` exists; it is written last and atomically, so an
+interrupted experiment resumes by skipping the finished runs. Each run keeps torch to one thread, since
+several runs share a machine.
+"""
+
+import json
+import os
+import tempfile
+import time
+from collections.abc import Callable
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from dataclasses import asdict
+from pathlib import Path
+from typing import Any, Optional
+
+from sb3_disagree.experiments.spec import RESULT, Experiment, Run
+
+BACKENDS = ("local", "ray")
+
+
+def _write_atomic(path: Path, data: bytes) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.")
+    with os.fdopen(fd, "wb") as f:
+        f.write(data)
+    os.replace(tmp, path)
+
+
+def train_and_evaluate(run: Run, folder: Path) -> dict[str, Any]:
+    """
+    Train one run into ``folder``, evaluate the new policy alone, and write ``result.json``.
+
+    :return: The result record
+    """
+    import torch as th
+
+    th.set_num_threads(1)
+    from sb3_disagree.prior_training import evaluate, make_env
+    from sb3_disagree.training import train
+
+    start = time.perf_counter()
+    run_dir, model, finished = train(run.config, run_dir=folder)
+    if not finished:
+        raise KeyboardInterrupt
+    seconds = time.perf_counter() - start
+    venv = make_env(run.config.env_id, run.config.goal, run.config.env_kwargs, n_envs=4, seed=run.seed + 20_000)
+    alone = evaluate(model, venv, run.final_episodes, deterministic=False)
+    venv.close()
+    result = {"cell": run.cell, "seed": run.seed, "steps": int(model.num_timesteps), "seconds": round(seconds, 1),
+              "fps": round(model.num_timesteps / max(seconds, 1e-9), 1), "final_alone": alone.as_dict(),
+              "config": asdict(run.config)}
+    _write_atomic(folder / RESULT, (json.dumps(result, indent=2) + "\n").encode())
+    return result
+
+
+def _ray_task(run: Run) -> tuple[dict[str, Any], dict[str, bytes]]:
+    """A run on a Ray worker, in a scratch folder; its files travel back to the driver."""
+    with tempfile.TemporaryDirectory() as tmp:
+        result = train_and_evaluate(run, Path(tmp))
+        files = {str(p.relative_to(tmp)): p.read_bytes() for p in Path(tmp).rglob("*") if p.is_file()}
+    return result, files
+
+
+def _unpack(folder: Path, files: dict[str, bytes]) -> None:
+    for rel, data in sorted(files.items(), key=lambda kv: kv[0] == RESULT):  # result.json last
+        _write_atomic(folder / rel, data)
+
+
+def run_experiment(
+    experiment: Experiment,
+    root: Path,
+    backend: str = "local",
+    jobs: Optional[int] = None,
+    address: Optional[str] = None,
+    on_result: Optional[Callable[[dict[str, Any]], None]] = None,
+) -> list[dict[str, Any]]:
+    """
+    Run every unfinished (cell, seed) of an experiment.
+
+    :param experiment: The grid
+    :param root: The experiment's results folder
+    :param backend: "local" (a process pool) or "ray"
+    :param jobs: Runs at a time on the local backend (default: the machine's cores)
+    :param address: The Ray cluster's address ("auto", "ray://host:10001"); None starts a local Ray
+    :param on_result: Called with each run's result as it arrives
+    :return: The results of the runs done now
+    """
+    if backend not in BACKENDS:
+        raise ValueError(f"--backend must be one of {', '.join(BACKENDS)}, got {backend!r}")
+    todo = [r for r in experiment.runs() if not r.finished(root)]
+    results: list[dict[str, Any]] = []
+
+    def done(result: dict[str, Any]) -> None:
+        results.append(result)
+        if on_result:
+            on_result(result)
+
+    if not todo:
+        return results
+    if backend == "ray":
+        import ray
+
+        ray.init(address=address, include_dashboard=False, log_to_driver=False, ignore_reinit_error=True)
+        task = ray.remote(num_cpus=1)(_ray_task)
+        pending = {task.remote(r): r for r in todo}
+        while pending:
+            ready, _ = ray.wait(list(pending), num_returns=1)
+            run = pending.pop(ready[0])
+            result, files = ray.get(ready[0])
+            _unpack(run.folder(root), files)
+            done(result)
+    elif (jobs or os.cpu_count() or 1) == 1:
+        for r in todo:
+            done(train_and_evaluate(r, r.folder(root)))
+    else:
+        with ProcessPoolExecutor(jobs or os.cpu_count()) as pool:
+            futures = [pool.submit(train_and_evaluate, r, r.folder(root)) for r in todo]
+            for future in as_completed(futures):
+                done(future.result())
+    return results

@@ -1,0 +1,142 @@
+"""
+An experiment: a named grid of runs described by a small YAML file.
+
+.. code-block:: yaml
+
+    name: fig3-bathtub
+    goal: bathtub
+    priors: [shower, toilet]
+    steps: 100000
+    seeds: [0, 1, 2, 3, 4]
+    budgets: [25000, 50000, 100000]   # success read at these steps in the report
+    final_episodes: 50                # the new policy alone, evaluated at the end of each run
+    run: {n_envs: 4}                  # RunConfig fields shared by every cell
+    acer: {reward_scale: 0.1}         # ACER hyperparameters on top of the defaults
+    cells:
+      disagreement: {mode: disagreement}
+      scratch: {mode: scratch}
+
+Each cell's mapping overrides RunConfig fields (``mode``, ``alpha``, ``beta``, ...) and may hold its own
+``acer`` mapping. Every (cell, seed) is one run, written under ``<results>/<cell>/seed-<seed>/``.
+"""
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Optional
+
+import yaml
+
+from sb3_disagree.training import ACER_KWARGS, RunConfig
+
+# Experiments shipped with the repository; a path to any YAML file works too.
+SHIPPED = Path(__file__).resolve().parents[2] / "benchmarks" / "experiments"
+RESULT = "result.json"
+
+
+@dataclass
+class Run:
+    """One cell and seed of an experiment, with the configuration it trains."""
+
+    cell: str
+    seed: int
+    config: RunConfig
+    final_episodes: int
+
+    def folder(self, root: Path) -> Path:
+        return root / self.cell / f"seed-{self.seed}"
+
+    def finished(self, root: Path) -> bool:
+        return (self.folder(root) / RESULT).exists()
+
+
+@dataclass
+class Experiment:
+    """
+    A named grid of runs.
+
+    :param name: The experiment's name (its results folder)
+    :param goal: The new goal
+    :param cells: Cell name -> overrides of RunConfig fields (and an ``acer`` mapping)
+    :param seeds: Seeds of every cell
+    :param steps: Env steps of every run
+    :param priors: "auto" or the priors' goal labels
+    :param env_id: Gymnasium id of the environment
+    :param budgets: Steps at which the report reads the success rate
+    :param final_episodes: Episodes of the final evaluation of the new policy alone
+    :param run: RunConfig fields shared by every cell
+    :param acer: ACER hyperparameters shared by every cell, on top of the defaults
+    :param trajectories: Whether the report draws a recorded episode per cell (paper Figure 5)
+    """
+
+    name: str
+    goal: str
+    cells: dict[str, dict[str, Any]]
+    seeds: list[int] = field(default_factory=lambda: [0])
+    steps: int = 100_000
+    priors: Any = "auto"
+    env_id: str = "sb3_disagree/Apartment-v0"
+    budgets: list[int] = field(default_factory=list)
+    final_episodes: int = 50
+    run: dict[str, Any] = field(default_factory=dict)
+    acer: dict[str, Any] = field(default_factory=dict)
+    trajectories: bool = False
+
+    def restrict(self, seeds: Optional[list[int]] = None, cells: Optional[list[str]] = None) -> None:
+        """Keep only some of the seeds and cells (each must be part of the experiment)."""
+        if seeds is not None:
+            unknown = sorted(set(seeds) - set(self.seeds))
+            if unknown:
+                raise ValueError(f"seeds {unknown} are not among {self.name}'s seeds {self.seeds}")
+            self.seeds = [s for s in self.seeds if s in seeds]
+        if cells is not None:
+            unknown = sorted(set(cells) - set(self.cells))
+            if unknown:
+                raise ValueError(f"cells {unknown} are not among {self.name}'s cells {list(self.cells)}")
+            self.cells = {c: v for c, v in self.cells.items() if c in cells}
+
+    def runs(self) -> list[Run]:
+        out = []
+        # Seed-major order: an experiment stopped early has every cell for its first seeds.
+        for seed in self.seeds:
+            for cell, overrides in self.cells.items():
+                overrides = dict(overrides or {})
+                acer = {**ACER_KWARGS, **self.acer, **overrides.pop("acer", {})}
+                fields = {**self.run, **overrides}
+                unknown = set(fields) - set(RunConfig.__dataclass_fields__)
+                if unknown:
+                    raise ValueError(f"experiment {self.name!r}, cell {cell!r}: unknown run fields {sorted(unknown)}")
+                config = RunConfig(goal=self.goal, env_id=self.env_id, priors=self.priors, steps=self.steps, seed=seed,
+                                   acer_kwargs=acer, **fields)
+                config.validate()
+                out.append(Run(cell, seed, config, self.final_episodes))
+        return out
+
+
+def find_experiment(name_or_path: str, search: Optional[Path] = None) -> Path:
+    """The YAML file of an experiment: a path, or a name in ``search`` (default: the shipped experiments)."""
+    path = Path(name_or_path)
+    if path.suffix in (".yaml", ".yml"):
+        if not path.exists():
+            raise FileNotFoundError(f"no experiment file {path}")
+        return path
+    folder = search or SHIPPED
+    candidate = folder / f"{name_or_path}.yaml"
+    if not candidate.exists():
+        known = sorted(p.stem for p in folder.glob("*.yaml")) if folder.exists() else []
+        raise FileNotFoundError(f"no experiment named {name_or_path!r} in {folder}; known: {', '.join(known) or 'none'}")
+    return candidate
+
+
+def load_experiment(name_or_path: str, search: Optional[Path] = None) -> Experiment:
+    """Read and check an experiment's YAML file."""
+    path = find_experiment(name_or_path, search)
+    data = yaml.safe_load(path.read_text()) or {}
+    data.setdefault("name", path.stem)
+    unknown = set(data) - set(Experiment.__dataclass_fields__)
+    if unknown:
+        raise ValueError(f"{path}: unknown keys {sorted(unknown)}")
+    if not data.get("cells"):
+        raise ValueError(f"{path}: an experiment needs at least one cell under 'cells'")
+    experiment = Experiment(**data)
+    experiment.runs()  # checks every cell now rather than in a worker
+    return experiment

@@ -1,0 +1,116 @@
+"""`dopt experiment run/report` on a tiny grid of the state apartment: local pool, resume, Ray."""
+
+import json
+
+import numpy as np
+import pytest
+import yaml
+from typer.testing import CliRunner
+
+from sb3_disagree.cli.app import app
+from sb3_disagree.experiments.report import summarize, table_markdown
+from sb3_disagree.experiments.runner import run_experiment
+from sb3_disagree.experiments.spec import SHIPPED, load_experiment
+
+STATE_ID = "sb3_disagree/ApartmentState-v0"
+runner = CliRunner()
+
+
+@pytest.fixture(scope="module")
+def zoo(tmp_path_factory):
+    root = tmp_path_factory.mktemp("zoo")
+    for goal in ("shower", "toilet"):
+        r = runner.invoke(app, ["priors", "train", "--goal", goal, "--env", STATE_ID, "--zoo", str(root), "--rounds", "1",
+                                "--steps-per-round", "200", "--epochs", "1", "--episodes", "2"])
+        assert r.exit_code == 0, r.output
+    return root
+
+
+def _grid(tmp_path, zoo, name="tiny", seeds=(0, 1)):
+    spec = {"name": name, "goal": "bathtub", "env_id": STATE_ID, "priors": ["shower", "toilet"], "steps": 320,
+            "seeds": list(seeds), "budgets": [160, 320], "final_episodes": 2, "trajectories": True,
+            "run": {"n_envs": 2, "zoo": str(zoo)}, "acer": {"replay_start": 80},
+            "cells": {"disagreement": {"mode": "disagreement"}, "beta-big": {"mode": "disagreement", "beta": 100.0},
+                      "scratch": {"mode": "scratch"}}}
+    path = tmp_path / f"{name}.yaml"
+    path.write_text(yaml.safe_dump(spec))
+    return path
+
+
+def test_run_report_and_skip_finished(zoo, tmp_path):
+    path = _grid(tmp_path, zoo, seeds=(0,))
+    out = tmp_path / "results"
+    result = runner.invoke(app, ["experiment", "run", str(path), "--jobs", "1", "--out", str(out)])
+    assert result.exit_code == 0, result.output
+    assert "3 to do" in result.output
+    records = [json.loads(p.read_text()) for p in sorted(out.glob("*/seed-0/result.json"))]
+    assert sorted(r["cell"] for r in records) == ["beta-big", "disagreement", "scratch"]
+    assert all(r["steps"] >= 320 and 0 <= r["final_alone"]["success_rate"] <= 1 for r in records)
+    # A huge beta follows the priors whenever the branch is entered; scratch never does.
+    usage = {c: yaml.safe_load((out / c / "seed-0" / "config.yaml").read_text()) for c in ("beta-big", "scratch")}
+    assert usage["beta-big"]["beta"] == 100.0 and usage["scratch"]["chosen_priors"] == []
+    again = runner.invoke(app, ["experiment", "run", str(path), "--jobs", "1", "--out", str(out)])
+    assert again.exit_code == 0 and "3 finished, 0 to do" in again.output
+    report = runner.invoke(app, ["experiment", "report", str(path), "--out", str(out), "--figure", str(tmp_path / "f.png")])
+    assert report.exit_code == 0, report.output
+    assert (out / "tiny.png").stat().st_size > 0 and (tmp_path / "f.png").exists()
+    text = (out / "report.md").read_text()
+    assert "| scratch | 1 |" in text and "success at 0.32k" in text
+
+
+def test_summary_numbers_match_the_runs(zoo, tmp_path):
+    experiment = load_experiment(str(_grid(tmp_path, zoo, seeds=(0,))))
+    out = tmp_path / "results"
+    run_experiment(experiment, out, jobs=1)
+    grid, summaries = summarize(experiment, out)
+    assert len(grid) == 50 and grid[-1] == 320
+    for s in summaries:
+        record = json.loads((out / s.cell / "seed-0" / "result.json").read_text())
+        assert s.final_alone == record["final_alone"]["success_rate"]
+        assert 0 <= s.auc <= 1
+        assert s.cell != "scratch" or np.isnan(s.usage).all()
+    assert table_markdown(experiment, summaries).count("\n") == 1 + len(summaries)
+
+
+def test_ray_backend_runs_two_tiny_runs(zoo, tmp_path):
+    ray = pytest.importorskip("ray")
+    experiment = load_experiment(str(_grid(tmp_path, zoo, seeds=(0, 1))))
+    experiment.cells = {"disagreement": experiment.cells["disagreement"]}
+    out = tmp_path / "results"
+    ray.init(num_cpus=1, include_dashboard=False, log_to_driver=False)  # one worker, imported once
+    try:
+        results = run_experiment(experiment, out, backend="ray")
+    finally:
+        ray.shutdown()
+    assert sorted(r["seed"] for r in results) == [0, 1]
+    for seed in (0, 1):
+        folder = out / "disagreement" / f"seed-{seed}"
+        for name in ("result.json", "model.zip", "progress.csv", "config.yaml"):
+            assert (folder / name).exists(), name
+        assert list((folder / "monitor").glob("*.monitor.csv"))
+
+
+@pytest.mark.parametrize("bad,message", [
+    ({"cells": {}}, "at least one cell"),
+    ({"cells": {"a": {"mode": "nonsense"}}}, "--mode"),
+    ({"cells": {"a": {"gamma": 0.9}}}, "unknown run fields"),
+    ({"cells": {"a": {"beta": -1}}}, "--beta"),
+    ({"typo": 1, "cells": {"a": {}}}, "unknown keys"),
+])
+def test_bad_experiment_files_are_clear_errors(tmp_path, bad, message):
+    path = tmp_path / "bad.yaml"
+    path.write_text(yaml.safe_dump({"goal": "bathtub", **bad}))
+    result = runner.invoke(app, ["experiment", "run", str(path)])
+    assert result.exit_code == 2 and message in result.output
+
+
+def test_unknown_experiment_name_lists_the_known_ones():
+    result = runner.invoke(app, ["experiment", "run", "fig99-nothing"])
+    assert result.exit_code == 2 and "no experiment named" in result.output
+
+
+def test_shipped_experiments_load():
+    names = {p.stem for p in SHIPPED.glob("*.yaml")}
+    assert {"fig3-bathtub", "fig3-nightstand", "fig5-trajectories", "fig6-beta", "fig7-alpha"} <= names
+    for name in names:
+        assert load_experiment(name).runs()
