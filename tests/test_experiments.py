@@ -29,7 +29,7 @@ def zoo(tmp_path_factory):
 def _grid(tmp_path, zoo, name="tiny", seeds=(0, 1)):
     spec = {"name": name, "goal": "bathtub", "env_id": STATE_ID, "priors": ["shower", "toilet"], "steps": 320,
             "seeds": list(seeds), "budgets": [160, 320], "final_episodes": 2, "trajectories": True,
-            "run": {"n_envs": 2, "zoo": str(zoo)}, "acer": {"replay_start": 80},
+            "run": {"n_envs": 2, "zoo": str(zoo), "eval_every": 160, "eval_episodes": 1}, "acer": {"replay_start": 80},
             "cells": {"disagreement": {"mode": "disagreement"}, "beta-big": {"mode": "disagreement", "beta": 100.0},
                       "scratch": {"mode": "scratch"}}}
     path = tmp_path / f"{name}.yaml"
@@ -69,6 +69,7 @@ def test_summary_numbers_match_the_runs(zoo, tmp_path):
         assert s.final_alone == record["final_alone"]["success_rate"]
         assert 0 <= s.auc <= 1
         assert s.cell != "scratch" or np.isnan(s.usage).all()
+        assert list(s.alone_steps) == [160, 320] and ((0 <= s.alone_mean) & (s.alone_mean <= 1)).all()
     assert table_markdown(experiment, summaries).count("\n") == 1 + len(summaries)
 
 
@@ -102,6 +103,15 @@ def test_bad_experiment_files_are_clear_errors(tmp_path, bad, message):
     path.write_text(yaml.safe_dump({"goal": "bathtub", **bad}))
     result = runner.invoke(app, ["experiment", "run", str(path)])
     assert result.exit_code == 2 and message in result.output
+
+
+def test_seeds_and_cells_can_be_restricted_but_not_invented(zoo, tmp_path):
+    path = _grid(tmp_path, zoo, seeds=(0, 1))
+    experiment = load_experiment(str(path))
+    experiment.restrict(seeds=[1], cells=["scratch"])
+    assert [(r.cell, r.seed) for r in experiment.runs()] == [("scratch", 1)]
+    result = runner.invoke(app, ["experiment", "run", str(path), "--seeds", "7"])
+    assert result.exit_code == 2 and "not among" in result.output
 
 
 def test_unknown_experiment_name_lists_the_known_ones():

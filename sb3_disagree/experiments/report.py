@@ -35,6 +35,18 @@ class CellSummary:
     final_alone_seeds: list[float]
     fps: float
     records: list[dict] = field(default_factory=list)
+    alone_steps: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    alone_mean: np.ndarray = field(default_factory=lambda: np.zeros(0))
+
+
+def alone_curve(folders: list[Path]) -> tuple[np.ndarray, np.ndarray]:
+    """The periodic evaluations of the new policy alone (``evaluations.npz``), averaged over runs at common steps."""
+    evals = [np.load(f / "evaluations.npz") for f in folders if (f / "evaluations.npz").exists()]
+    if not evals:
+        return np.zeros(0), np.zeros(0)
+    n = min(len(e["timesteps"]) for e in evals)
+    steps = evals[0]["timesteps"][:n]
+    return steps, np.mean([e["successes"][:n].mean(axis=1) for e in evals], axis=0)
 
 
 def summarize(experiment: Experiment, root: Path) -> tuple[np.ndarray, list[CellSummary]]:
@@ -63,7 +75,8 @@ def summarize(experiment: Experiment, root: Path) -> tuple[np.ndarray, list[Cell
             cell=cell, seeds=[r.seed for r in runs], mean=mean, low=low, high=high, usage=usage,
             steps_to_50=steps_to(mean, grid, 0.5), steps_to_90=steps_to(mean, grid, 0.9), at_budgets=at,
             auc=float(np.mean(np.nan_to_num(mean, nan=0.0))), final_alone=float(np.mean(alone)),
-            final_alone_seeds=alone, fps=float(np.mean([r["fps"] for r in records])), records=records))
+            final_alone_seeds=alone, fps=float(np.mean([r["fps"] for r in records])), records=records,
+            alone_steps=alone_curve(folders)[0], alone_mean=alone_curve(folders)[1]))
     return grid, summaries
 
 
@@ -98,6 +111,8 @@ def plot(experiment: Experiment, grid: np.ndarray, summaries: list[CellSummary],
     for i, s in enumerate(summaries):
         ax1.plot(grid, s.mean, color=colors(i), label=f"{s.cell} ({len(s.seeds)} seeds)")
         ax1.fill_between(grid, np.clip(s.low, 0, 1), np.clip(s.high, 0, 1), color=colors(i), alpha=0.2)
+        if len(s.alone_steps):
+            ax1.plot(s.alone_steps, s.alone_mean, "--o", color=colors(i), markersize=3, linewidth=1)
         if not np.all(np.isnan(s.usage)):
             ax2.plot(grid, s.usage, color=colors(i), label=s.cell)
     priors = experiment.priors if isinstance(experiment.priors, str) else " + ".join(experiment.priors)
@@ -105,7 +120,8 @@ def plot(experiment: Experiment, grid: np.ndarray, summaries: list[CellSummary],
             title=f"{experiment.name}: {experiment.goal}, priors {priors}")
     ax2.set(xlabel="env steps", ylabel="share of steps following the priors", ylim=(-0.02, 1.02),
             title="prior usage (mean over seeds)")
-    ax1.legend(loc="lower right", fontsize=8)
+    ax1.legend(loc="lower right", fontsize=8, title="solid: training; dashed: the new policy alone" if any(
+        len(s.alone_steps) for s in summaries) else None, title_fontsize=7)
     if ax2.lines:
         ax2.legend(loc="upper right", fontsize=8)
     for j, s in enumerate(summaries[:n_paths]):
