@@ -63,9 +63,7 @@ def summarize(experiment: Experiment, root: Path) -> tuple[np.ndarray, list[Cell
         mean, low, high = mean_and_band(curves)
         usage = np.full(len(grid), np.nan)
         if runs[0].config.mode != "scratch":
-            usage_curves = np.array([progress_curve(f, "prior/usage", grid, smooth=5) for f in folders])
-            if not np.isnan(usage_curves).all():
-                usage = np.nanmean(usage_curves, axis=0)
+            usage = mean_and_band([progress_curve(f, "prior/usage", grid, smooth=5) for f in folders])[0]
         at = {}
         for b in experiment.budgets:
             i = int(np.searchsorted(grid, b, side="right")) - 1
