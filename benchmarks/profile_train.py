@@ -1,0 +1,79 @@
+"""
+Where `dopt train`'s time goes on the apartment RGB with disagreement options: env step and render,
+the new policy's forward pass, the priors' forward passes, the behaviour's other work, and ACER's
+updates, measured with cProfile after a warm-up that fills the buffer past ``replay_start``.
+
+    python benchmarks/profile_train.py --steps 4000 [--threads 1] [--write]
+"""
+
+import argparse
+import cProfile
+import os
+import platform
+import pstats
+import time
+from pathlib import Path
+from tempfile import TemporaryDirectory
+
+import torch as th
+from docs_section import write_section
+
+# (label, function name, file fragment): cumulative time of each, the largest match kept.
+PARTS = [
+    ("env step (MiniWorld render + physics)", "step_wait", "dummy_vec_env"),
+    ("priors' forward passes", "probs", "options/priors"),
+    ("behaviour (entropy branch, gate, mu)", "__call__", "options/base"),
+    ("new policy's forward in rollouts", "action_probs", "acer/policies"),
+    ("rollout collection in all", "collect_rollouts", "acer/acer"),
+    ("ACER updates (on-policy + replay)", "_update", "acer/acer"),
+    ("  backward", "backward", "torch/_tensor"),
+    ("  replay sampling", "sample", "acer/buffers"),
+]
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--steps", type=int, default=4_000)
+    parser.add_argument("--threads", type=int, default=1)
+    parser.add_argument("--mode", default="disagreement")
+    parser.add_argument("--write", action="store_true", help="write the table into docs/benchmarks.md")
+    args = parser.parse_args()
+    th.set_num_threads(args.threads)
+    from sb3_disagree.training import RunConfig, train
+
+    with TemporaryDirectory() as tmp:
+        warm = RunConfig(goal="bathtub", mode=args.mode, priors=["shower", "toilet"], steps=2_400)
+        run_dir, _, _ = train(warm, Path(tmp))
+        import yaml
+
+        saved = yaml.safe_load((run_dir / "config.yaml").read_text())
+        (run_dir / "config.yaml").write_text(yaml.safe_dump({**saved, "steps": 2_400 + args.steps}))
+        profiler = cProfile.Profile()
+        start = time.perf_counter()
+        profiler.enable()
+        train(warm, resume=run_dir)
+        profiler.disable()
+        wall = time.perf_counter() - start
+    stats = pstats.Stats(profiler)
+    total = stats.total_tt
+    rows = []
+    for label, name, fragment in PARTS:
+        best = 0.0
+        for (file, _, fn), (_, _, _, cumtime, _) in stats.stats.items():
+            if fn == name and fragment in file.replace("\\", "/"):
+                best = max(best, cumtime)
+        rows.append(f"| {label} | {best:.1f} | {100 * best / total:.0f}% |")
+    body = (f"Command: `python benchmarks/profile_train.py --steps {args.steps} --threads {args.threads}`: `dopt train "
+            f"--goal bathtub --mode {args.mode}` on the defaults (4 envs, RGB 60x80, priors shower and toilet), "
+            f"{args.steps} env steps after a 2.4k-step warm-up, under cProfile, {args.threads} torch thread(s); "
+            f"{platform.machine()}, {os.cpu_count()} cores. {args.steps} steps in {wall:.1f} s "
+            f"({args.steps / wall:.0f} steps/s under the profiler, model load and env creation included).\n\n"
+            "| part | cumulative s | share |\n|---|---|---|\n" + "\n".join(rows) + "\n")
+    if args.write:
+        write_section("train-profile", "Where `dopt train`'s time goes", body)
+    print(body)
+    stats.sort_stats("tottime").print_stats(20)
+
+
+if __name__ == "__main__":
+    main()
