@@ -58,6 +58,8 @@ def train(
     eval_every: int = typer.Option(0, "--eval-every", help="Evaluate the new policy alone every this many env "
                                    "steps (0: never); logged as eval/success_rate."),
     eval_episodes: int = typer.Option(20, "--eval-episodes", help="Episodes per evaluation."),
+    vec_env: str = typer.Option("dummy", "--vec-env", help="dummy (envs in this process) or subproc (one process "
+                                "per env)."),
     out: Path = typer.Option(Path("runs"), "--out", help="Root folder of the runs."),
     resume: Optional[Path] = typer.Option(None, "--resume", help="A run folder to continue."),
 ) -> None:
@@ -68,7 +70,7 @@ def train(
         config = RunConfig(goal=goal, env_id=env, mode=mode,
                            priors="auto" if priors == "auto" else [p.strip() for p in priors.split(",") if p.strip()],
                            alpha=alpha, beta=beta, steps=steps, seed=seed, n_envs=n_envs,
-                           eval_every=eval_every, eval_episodes=eval_episodes,
+                           eval_every=eval_every, eval_episodes=eval_episodes, vec_env=vec_env,
                            embedding=str(embedding) if embedding else None, zoo=str(zoo) if zoo else None)
         if resume is None:
             config.validate()

@@ -52,6 +52,8 @@ class RunConfig:
     :param eval_every: Evaluate the new policy alone (no priors, sampled actions) every this many env
         steps, logged as ``eval/success_rate`` and kept in ``evaluations.npz``; 0 never
     :param eval_episodes: Episodes per evaluation
+    :param vec_env: "dummy" (envs stepped in this process) or "subproc" (one process per env: their
+        rendering runs in parallel on several cores)
     """
 
     goal: str
@@ -70,6 +72,7 @@ class RunConfig:
     env_kwargs: dict[str, Any] = field(default_factory=dict)
     eval_every: int = 0
     eval_episodes: int = 20
+    vec_env: str = "dummy"
 
     def validate(self) -> None:
         if self.mode not in MODES:
@@ -80,6 +83,8 @@ class RunConfig:
             raise ValueError(f"--alpha must be >= 1, got {self.alpha}")
         if self.steps < 1 or self.n_envs < 1:
             raise ValueError("--steps and --n-envs must be positive")
+        if self.vec_env not in ("dummy", "subproc"):
+            raise ValueError(f"--vec-env must be dummy or subproc, got {self.vec_env!r}")
         if self.eval_every < 0 or self.eval_episodes < 1:
             raise ValueError("--eval-every must be >= 0 and --eval-episodes positive")
 
@@ -146,13 +151,28 @@ class RecordTrajectories(BaseCallback):
             f.write(json.dumps(record) + "\n")
 
 
-def build_env(config: RunConfig, run_dir: Optional[Path], n_envs: Optional[int] = None, seed: Optional[int] = None):
-    import sb3_disagree.envs  # noqa: F401  (registers the environments)
+def build_env(config: RunConfig, run_dir: Optional[Path], n_envs: Optional[int] = None, seed: Optional[int] = None,
+              vec_env: str = "dummy"):
+    """The VecEnv of a run (Monitor files under ``run_dir/monitor`` when given)."""
+    import functools
 
-    return make_vec_env(config.env_id, n_envs=n_envs or config.n_envs, seed=config.seed if seed is None else seed,
+    from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv
+
+    from gymnasium.envs.registration import registry
+
+    from sb3_disagree.envs import make
+
+    if config.env_id not in registry:
+        ours = ", ".join(k for k in registry if k.startswith("sb3_disagree/"))
+        raise ValueError(f"unknown environment {config.env_id!r}; this package registers {ours}")
+    subproc = vec_env == "subproc"
+    return make_vec_env(functools.partial(make, config.env_id), n_envs=n_envs or config.n_envs,
+                        seed=config.seed if seed is None else seed,
                         monitor_dir=str(run_dir / "monitor") if run_dir else None,
                         env_kwargs=dict(goal=config.goal, **config.env_kwargs),
-                        monitor_kwargs=dict(info_keywords=("is_success",)))
+                        monitor_kwargs=dict(info_keywords=("is_success",)),
+                        vec_env_cls=SubprocVecEnv if subproc else DummyVecEnv,
+                        vec_env_kwargs=dict(start_method="forkserver") if subproc else None)
 
 
 def evaluation_callback(config: RunConfig, run_dir: Path) -> EvalCallback:
@@ -191,7 +211,7 @@ def train(config: RunConfig, out: Path = Path("runs"), resume: Optional[Path] = 
     config.validate()
     run_dir = Path(resume or run_dir or config.run_dir(Path(out)))
     run_dir.mkdir(parents=True, exist_ok=True)
-    env = build_env(config, run_dir)
+    env = build_env(config, run_dir, vec_env=config.vec_env)
     behaviour, prior_names, sims = None, [], []
     if config.mode != "scratch":
         prior_names, sims, priors = choose_priors(config, env)

@@ -64,6 +64,14 @@ def test_periodic_evaluation_of_the_policy_alone(zoo, tmp_path):
     assert "the new policy alone" in result.output
 
 
+def test_subprocess_envs_train_like_in_process_ones(zoo, tmp_path):
+    result = runner.invoke(app, _train_args(zoo, tmp_path, "--vec-env", "subproc", "--mode", "scratch"))
+    assert result.exit_code == 0, result.output
+    run = tmp_path / "sb3_disagree__ApartmentState-v0" / "bathtub" / "scratch-0"
+    assert yaml.safe_load((run / "config.yaml").read_text())["vec_env"] == "subproc"
+    assert len(list((run / "monitor").glob("*.monitor.csv"))) == 2
+
+
 def test_eval_and_trajectory_picture(zoo, tmp_path):
     assert runner.invoke(app, _train_args(zoo, tmp_path)).exit_code == 0
     run = tmp_path / "sb3_disagree__ApartmentState-v0" / "bathtub" / "disagreement-0"
@@ -105,6 +113,9 @@ def test_interrupt_saves_and_resume_continues_the_step_count(zoo, tmp_path):
     (["--mode", "greedy"], "--mode must be one of"),
     (["--priors", "shower"], "at least two"),
     (["--priors", "shower,sofa"], "no usable prior for sofa"),
+    (["--vec-env", "threads"], "--vec-env must be dummy or subproc"),
+    (["--env", "sb3_disagree/Castle-v0"], "unknown environment"),
+    (["--eval-every", "-5"], "--eval-every must be >= 0"),
 ])
 def test_bad_input_is_a_message_and_exit_code_2(zoo, tmp_path, extra, message):
     result = runner.invoke(app, _train_args(zoo, tmp_path, *extra))

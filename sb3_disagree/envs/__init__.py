@@ -26,7 +26,17 @@ if APARTMENT_ID not in registry:
     register(APARTMENT_ID, entry_point="sb3_disagree.envs.apartment:ApartmentEnv", kwargs={"obs": "rgb"})
     register(APARTMENT_STATE_ID, entry_point="sb3_disagree.envs.apartment:ApartmentEnv", kwargs={"obs": "state"})
 
+
+
+def make(env_id: str, **kwargs):
+    """``gym.make`` after this package's environments are registered: picklable, so a worker process
+    (SubprocVecEnv, Ray) that has not imported the package can build them too."""
+    import gymnasium as gym
+
+    return gym.make(env_id, **kwargs)
+
+
 from sb3_disagree.envs.apartment import ApartmentEnv  # noqa: E402
 from sb3_disagree.envs.layout import Layout, default_layout  # noqa: E402
 
-__all__ = ["APARTMENT_ID", "APARTMENT_STATE_ID", "ApartmentEnv", "Layout", "default_layout"]
+__all__ = ["APARTMENT_ID", "APARTMENT_STATE_ID", "ApartmentEnv", "Layout", "default_layout", "make"]

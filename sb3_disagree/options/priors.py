@@ -38,8 +38,11 @@ class PriorSet:
         :param observations: A batch of observations as the VecEnv gives them
         :return: pi_i(.|s) for every prior, shape (k, n_envs, n_actions)
         """
-        out = []
+        out, converted = [], {}
         for prior in self.priors:
-            obs, _ = prior.policy.obs_to_tensor(observations)
-            out.append(prior.policy.get_distribution(obs).distribution.probs)
+            # Priors with the same observation space share one conversion of the batch.
+            key = (str(prior.policy.observation_space), str(prior.device))
+            if key not in converted:
+                converted[key] = prior.policy.obs_to_tensor(observations)[0]
+            out.append(prior.policy.get_distribution(converted[key]).distribution.probs)
         return th.stack(out)
