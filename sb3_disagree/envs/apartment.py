@@ -114,6 +114,19 @@ class ApartmentEnv(gym.Env):
             "is_success": success,
         }
 
+    # What the grid expert reads (sb3_disagree.envs.expert.GridExpert).
+    @property
+    def goal_xz(self) -> tuple[float, float]:
+        return self.goal.x, self.goal.z
+
+    def blocked(self, x: float, z: float) -> bool:
+        return self.layout.blocked(x, z)
+
+    def nav_field(self):
+        from sb3_disagree.envs.expert import _field
+
+        return _field(self.layout, self.goal.name, self.reach)
+
     def set_pose(self, x: float, z: float, heading: float) -> None:
         """Put the agent at a pose (for tests, pictures and the expert); the episode goes on from there."""
         self.x, self.z, self.heading = float(x), float(z), float(heading)

@@ -6,22 +6,19 @@ It is what imitation-learned priors are trained from, and the yardstick for how 
 policy needs.
 """
 
-import heapq
 import math
 from functools import lru_cache
 from typing import Optional
 
 import numpy as np
 
-from sb3_disagree.envs.apartment import MOVE_FORWARD, TURN_LEFT, TURN_RIGHT, ApartmentEnv
+from sb3_disagree.envs.apartment import MOVE_FORWARD, TURN_LEFT, TURN_RIGHT
+from sb3_disagree.envs.grid import GridField
 from sb3_disagree.envs.layout import Layout
 
-_NEIGHBOURS = [(-1, -1), (-1, 0), (-1, 1), (0, -1), (0, 1), (1, -1), (1, 0), (1, 1)]
-
-
-class DistanceField:
+class DistanceField(GridField):
     """
-    Geodesic distance to a goal region over a grid of free cells (8-connected Dijkstra).
+    Geodesic distance to a goal region over the apartment's free space (see :class:`GridField`).
 
     :param layout: The apartment
     :param goal_x: Goal centre x
@@ -33,10 +30,8 @@ class DistanceField:
 
     def __init__(self, layout: Layout, goal_x: float, goal_z: float, goal_radius: float, cell: float = 0.1,
                  margin: float = 0.1) -> None:
-        self.cell = cell
         xs = np.arange(min(r.min_x for r in layout.all_rooms), max(r.max_x for r in layout.all_rooms) + cell, cell)
         zs = np.arange(min(r.min_z for r in layout.all_rooms), max(r.max_z for r in layout.all_rooms) + cell, cell)
-        self.x0, self.z0 = float(xs[0]), float(zs[0])
         gx, gz = np.meshgrid(xs, zs, indexing="ij")
         inside = np.zeros(gx.shape, dtype=bool)
         for r in layout.all_rooms:
@@ -45,58 +40,8 @@ class DistanceField:
             room, c = layout.room(d.room), layout.corridor
             z0, z1 = sorted((room.max_z, c.min_z) if room.max_z <= c.min_z else (c.max_z, room.min_z))
             inside |= (gx >= d.min_x) & (gx <= d.max_x) & (gz >= z0) & (gz <= z1)
-        self.free = inside & ~_blocked_grid(layout, gx, gz, layout.agent_radius + margin)
-        goal = self.free & (np.hypot(gx - goal_x, gz - goal_z) < goal_radius)
-        if not goal.any():
-            raise ValueError("the goal region has no free cell: is the goal reachable?")
-        self.goal = goal
-        self.dist = _dijkstra(self.free, goal, cell)
-        # Precomputed look-ups, so that the expert's many queries per step are O(1):
-        # the nearest reachable cell of every cell, and the next cell down the distance of every cell.
-        from scipy.ndimage import distance_transform_edt
-
-        reachable = np.isfinite(self.dist)
-        _, (self._near_i, self._near_j) = distance_transform_edt(~reachable, return_indices=True)
-        padded = np.pad(self.dist, 1, constant_values=np.inf)
-        n, m = self.dist.shape
-        shifted = np.stack([padded[1 + di:1 + di + n, 1 + dj:1 + dj + m] for di, dj in _NEIGHBOURS])
-        k = shifted.argmin(0)
-        better = shifted.min(0) < self.dist
-        ii, jj = np.meshgrid(np.arange(n), np.arange(m), indexing="ij")
-        offsets = np.array(_NEIGHBOURS)
-        self._down_i = np.where(better, ii + offsets[k, 0], ii)
-        self._down_j = np.where(better, jj + offsets[k, 1], jj)
-        self._waypoints: dict[int, tuple[np.ndarray, np.ndarray]] = {}
-
-    def index(self, x: float, z: float) -> tuple[int, int]:
-        i = int(round((x - self.x0) / self.cell))
-        j = int(round((z - self.z0) / self.cell))
-        return min(max(i, 0), self.free.shape[0] - 1), min(max(j, 0), self.free.shape[1] - 1)
-
-    def point(self, i: int, j: int) -> tuple[float, float]:
-        return self.x0 + i * self.cell, self.z0 + j * self.cell
-
-    def nearest_free(self, x: float, z: float) -> tuple[int, int]:
-        """The reachable free cell nearest to (x, z)."""
-        i, j = self.index(x, z)
-        return int(self._near_i[i, j]), int(self._near_j[i, j])
-
-    def waypoint(self, x: float, z: float, lookahead: int) -> tuple[float, float]:
-        """The point ``lookahead`` cells down the steepest descent of the distance from (x, z)."""
-        if lookahead not in self._waypoints:
-            wi, wj = self._near_i, self._near_j
-            for _ in range(lookahead):
-                wi, wj = self._down_i[wi, wj], self._down_j[wi, wj]
-            self._waypoints[lookahead] = (wi, wj)
-        wi, wj = self._waypoints[lookahead]
-        i, j = self.index(x, z)
-        return self.point(int(wi[i, j]), int(wj[i, j]))
-
-    def cost(self, x: float, z: float) -> float:
-        """Geodesic distance; outside the free cells, that of the nearest free cell plus the offset to it."""
-        fi, fj = self.nearest_free(x, z)
-        fx, fz = self.point(fi, fj)
-        return float(self.dist[fi, fj]) + math.hypot(fx - x, fz - z)
+        free = inside & ~_blocked_grid(layout, gx, gz, layout.agent_radius + margin)
+        super().__init__(free, np.hypot(gx - goal_x, gz - goal_z) < goal_radius, xs[0], zs[0], cell)
 
 
 def _blocked_grid(layout: Layout, gx: np.ndarray, gz: np.ndarray, radius: float) -> np.ndarray:
@@ -112,27 +57,6 @@ def _blocked_grid(layout: Layout, gx: np.ndarray, gz: np.ndarray, radius: float)
     return blocked.reshape(gx.shape)
 
 
-def _dijkstra(free: np.ndarray, sources: np.ndarray, cell: float) -> np.ndarray:
-    dist = np.full(free.shape, np.inf)
-    heap = [(0.0, int(i), int(j)) for i, j in zip(*np.nonzero(sources))]
-    for _, i, j in heap:
-        dist[i, j] = 0.0
-    heapq.heapify(heap)
-    n, m = free.shape
-    while heap:
-        d, i, j = heapq.heappop(heap)
-        if d > dist[i, j]:
-            continue
-        for di, dj in _NEIGHBOURS:
-            a, b = i + di, j + dj
-            if 0 <= a < n and 0 <= b < m and free[a, b]:
-                nd = d + cell * (1.4142135623730951 if di and dj else 1.0)
-                if nd < dist[a, b]:
-                    dist[a, b] = nd
-                    heapq.heappush(heap, (nd, a, b))
-    return dist
-
-
 @lru_cache(maxsize=64)
 def _field(layout: Layout, goal: str, reach: float) -> DistanceField:
     g = layout.object(goal)
@@ -140,13 +64,17 @@ def _field(layout: Layout, goal: str, reach: float) -> DistanceField:
     return DistanceField(layout, g.x, g.z, goal_radius=reach - 0.05, margin=0.1)
 
 
-class ApartmentExpert:
+class GridExpert:
     """
-    Drive the agent of an :class:`ApartmentEnv` to its goal object along the shortest free path: each
-    step searches all sequences of ``depth`` actions with the exact dynamics and takes the first action
-    of the one ending closest to the goal (in steps: distance along the free space plus turns to face it).
+    Drive an agent to its goal along the shortest free path: each step searches all sequences of
+    ``depth`` actions with the exact dynamics and takes the first action of the one ending closest to
+    the goal (in steps: distance along the free space plus turns to face it).
 
-    :param env: The environment (its ``unwrapped`` apartment is read for the pose and goal)
+    Any environment works that has the apartment's actions and exposes ``x``, ``z``, ``heading``,
+    ``step_count``, ``goal_xz``, ``reach``, ``forward_step``, ``turn_step`` (radians),
+    ``blocked(x, z)`` and ``nav_field()`` (a :class:`GridField` to the goal): the apartment and scans.
+
+    :param env: The environment (its ``unwrapped`` env is read for the pose and goal)
     :param noise: Probability of a uniformly random action instead of the planned one
     :param lookahead: Distance of the waypoint that gives the path's direction, in grid cells of 0.1 m
     :param depth: Number of actions searched ahead
@@ -154,12 +82,13 @@ class ApartmentExpert:
     """
 
     def __init__(self, env, noise: float = 0.0, lookahead: int = 4, depth: int = 3, seed: Optional[int] = None) -> None:
-        self.env: ApartmentEnv = env.unwrapped
+        self.env = env.unwrapped
         self.noise = noise
         self.lookahead = lookahead
         self.depth = depth
         self.rng = np.random.default_rng(seed)
-        self.field = _field(self.env.layout, self.env.goal.name, self.env.reach)
+        self.field: GridField = self.env.nav_field()
+        self.gx, self.gz = self.env.goal_xz
 
     def value(self, x: float, z: float, heading: float) -> float:
         """
@@ -167,11 +96,11 @@ class ApartmentExpert:
         heading and the direction of the path (toward a waypoint down the distance field).
         """
         e = self.env
-        if math.hypot(e.goal.x - x, e.goal.z - z) < e.reach:
+        if math.hypot(self.gx - x, self.gz - z) < e.reach:
             return 0.0
         tx, tz = self.field.waypoint(x, z, self.lookahead)
         if math.hypot(tx - x, tz - z) < 1e-6:
-            tx, tz = e.goal.x, e.goal.z
+            tx, tz = self.gx, self.gz
         misalignment = abs(_wrap(math.atan2(-(tz - z), tx - x) - heading))
         # In steps: forward steps to cover the distance, turn steps to face the path.
         return self.field.cost(x, z) / e.forward_step + misalignment / e.turn_step
@@ -183,12 +112,12 @@ class ApartmentExpert:
         if action == TURN_RIGHT:
             return x, z, heading - e.turn_step
         nx, nz = x + e.forward_step * math.cos(heading), z - e.forward_step * math.sin(heading)
-        return (x, z, heading) if e.layout.blocked(nx, nz) else (nx, nz, heading)
+        return (x, z, heading) if e.blocked(nx, nz) else (nx, nz, heading)
 
     def _search(self, x: float, z: float, heading: float, depth: int) -> float:
         """Lowest steps-plus-value over all action sequences of ``depth`` steps from a pose."""
         e = self.env
-        if math.hypot(e.goal.x - x, e.goal.z - z) < e.reach:
+        if math.hypot(self.gx - x, self.gz - z) < e.reach:
             return 0.0
         if depth == 0:
             return self.value(x, z, heading)
@@ -228,6 +157,9 @@ class ApartmentExpert:
         key = _pose_key(*self._next(e.x, e.z, e.heading, action))
         self._visits[key] = self._visits.get(key, 0) + 1
         return action
+
+
+ApartmentExpert = GridExpert  # the apartment's expert is the grid expert
 
 
 def _pose_key(x: float, z: float, heading: float) -> tuple[int, int, int]:
