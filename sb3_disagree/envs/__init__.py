@@ -21,10 +21,14 @@ os.environ.setdefault("LP_NUM_THREADS", "0")
 
 APARTMENT_ID = "sb3_disagree/Apartment-v0"
 APARTMENT_STATE_ID = "sb3_disagree/ApartmentState-v0"
+OFFICE_ID = "sb3_disagree/Office-v0"
+OFFICE_STATE_ID = "sb3_disagree/OfficeState-v0"
 
 if APARTMENT_ID not in registry:
     register(APARTMENT_ID, entry_point="sb3_disagree.envs.apartment:ApartmentEnv", kwargs={"obs": "rgb"})
     register(APARTMENT_STATE_ID, entry_point="sb3_disagree.envs.apartment:ApartmentEnv", kwargs={"obs": "state"})
+    register(OFFICE_ID, entry_point="sb3_disagree.envs.scan:ScanEnv", kwargs={"obs": "rgb"})
+    register(OFFICE_STATE_ID, entry_point="sb3_disagree.envs.scan:ScanEnv", kwargs={"obs": "state"})
 
 
 
@@ -39,4 +43,4 @@ def make(env_id: str, **kwargs):
 from sb3_disagree.envs.apartment import ApartmentEnv  # noqa: E402
 from sb3_disagree.envs.layout import Layout, default_layout  # noqa: E402
 
-__all__ = ["APARTMENT_ID", "APARTMENT_STATE_ID", "ApartmentEnv", "Layout", "default_layout", "make"]
+__all__ = ["OFFICE_ID", "OFFICE_STATE_ID", "APARTMENT_ID", "APARTMENT_STATE_ID", "ApartmentEnv", "Layout", "default_layout", "make"]
