@@ -121,6 +121,6 @@ def test_unknown_experiment_name_lists_the_known_ones():
 
 def test_shipped_experiments_load():
     names = {p.stem for p in SHIPPED.glob("*.yaml")}
-    assert {"fig3-bathtub", "fig3-nightstand", "fig5-trajectories", "fig6-beta", "fig7-alpha"} <= names
+    assert {"fig3-bathtub", "fig3-nightstand", "fig5-trajectories", "fig6-beta", "fig7-alpha", "fig9-office"} <= names
     for name in names:
         assert load_experiment(name).runs()
