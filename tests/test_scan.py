@@ -31,6 +31,15 @@ def _two_rooms(folder, fmt="glb"):
     return path
 
 
+def _expert_succeeds(env, expert, seed):
+    env.reset(seed=seed)
+    for _ in range(500):
+        _, _, terminated, truncated, info = env.step(expert())
+        if terminated or truncated:
+            return terminated and info["is_success"]
+    return False
+
+
 @pytest.fixture(scope="module")
 def rooms(tmp_path_factory):
     return _two_rooms(tmp_path_factory.mktemp("scene"))
@@ -82,12 +91,7 @@ def test_expert_reaches_the_goal_from_50_random_starts(rooms, scene, goal):
     env = ScanEnv(goal=goal, scene=rooms if scene == "rooms" else None, obs="state")
     expert = GridExpert(env)
     for seed in range(50):
-        env.reset(seed=seed)
-        for _ in range(500):
-            _, _, terminated, truncated, info = env.step(expert())
-            if terminated or truncated:
-                break
-        assert terminated and info["is_success"], (scene, seed)
+        assert _expert_succeeds(env, expert, seed), (scene, seed)
 
 
 def test_rewards_follow_the_geodesic_distance(rooms):
@@ -138,9 +142,4 @@ def test_every_goal_of_the_shipped_office_is_reachable():
         env = ScanEnv(goal=goal, obs="state")
         expert = GridExpert(env)
         for seed in range(5):
-            env.reset(seed=seed)
-            for _ in range(500):
-                _, _, terminated, truncated, _ = env.step(expert())
-                if terminated or truncated:
-                    break
-            assert terminated, (goal, seed)
+            assert _expert_succeeds(env, expert, seed), (goal, seed)

@@ -10,16 +10,15 @@ so their dynamics and rewards are identical.
 import math
 from typing import Any, Optional
 
-import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
 from sb3_disagree.envs.layout import CORRIDOR, Layout, default_layout
+from sb3_disagree.envs.navigation import MOVE_FORWARD, TURN_LEFT, TURN_RIGHT, NavigationEnv
 
-TURN_LEFT, TURN_RIGHT, MOVE_FORWARD = 0, 1, 2
 
 
-class ApartmentEnv(gym.Env):
+class ApartmentEnv(NavigationEnv):
     """
     Navigate from a random pose in the corridor to one goal object.
 
@@ -78,10 +77,7 @@ class ApartmentEnv(gym.Env):
             self.observation_space = spaces.Box(-1.0, 1.0, (4,), dtype=np.float32)
         self._obs_size = (obs_width, obs_height)
         self._renderer = None
-        self._expert = None
-        self.x = self.z = self.heading = 0.0
-        self.step_count = 0
-        self.path: list[tuple[float, float]] = []
+        self._init_pose()
 
     # ------------------------------------------------------------------ pose and observation
 
@@ -127,53 +123,16 @@ class ApartmentEnv(gym.Env):
 
         return _field(self.layout, self.goal.name, self.reach)
 
-    def set_pose(self, x: float, z: float, heading: float) -> None:
-        """Put the agent at a pose (for tests, pictures and the expert); the episode goes on from there."""
-        self.x, self.z, self.heading = float(x), float(z), float(heading)
+    def reached(self) -> bool:
+        return self.distance < self.reach
 
-    # ------------------------------------------------------------------ gymnasium API
-
-    def reset(self, *, seed: Optional[int] = None, options: Optional[dict] = None) -> tuple[np.ndarray, dict]:
-        super().reset(seed=seed)
+    def _sample_pose(self) -> tuple[float, float, float]:
         c, r = self.layout.corridor, self.layout.agent_radius
         while True:
             x = self.np_random.uniform(c.min_x + r, c.max_x - r)
             z = self.np_random.uniform(c.min_z + r, c.max_z - r)
             if not self.layout.blocked(x, z):
-                break
-        self.set_pose(x, z, self.np_random.uniform(-math.pi, math.pi))
-        self.step_count = 0
-        self.path = [(self.x, self.z)]
-        return self._obs(), self._info()
-
-    def step(self, action: int) -> tuple[np.ndarray, float, bool, bool, dict]:
-        action = int(action)
-        if not self.action_space.contains(action):
-            raise ValueError(f"invalid action {action}; actions are 0 turn left, 1 turn right, 2 move forward")
-        before = self.distance
-        if action == TURN_LEFT:
-            self.heading = _wrap(self.heading + self.turn_step)
-        elif action == TURN_RIGHT:
-            self.heading = _wrap(self.heading - self.turn_step)
-        else:
-            x = self.x + self.forward_step * math.cos(self.heading)
-            z = self.z - self.forward_step * math.sin(self.heading)
-            if not self.layout.blocked(x, z):
-                self.x, self.z = x, z
-        self.step_count += 1
-        self.path.append((self.x, self.z))
-        success = self.distance < self.reach
-        reward = before - self.distance - self.step_penalty + (self.success_reward if success else 0.0)
-        truncated = not success and self.step_count >= self.max_episode_steps
-        return self._obs(), reward, success, truncated, self._info(success)
-
-    def expert_action(self) -> int:
-        """The scripted expert's action for the current state (what imitation learning is labelled with)."""
-        if self._expert is None:
-            from sb3_disagree.envs.expert import ApartmentExpert
-
-            self._expert = ApartmentExpert(self)
-        return self._expert.planned_action(self.x, self.z, self.heading)
+                return x, z, self.np_random.uniform(-math.pi, math.pi)
 
     def render(self) -> Optional[np.ndarray]:
         if self.render_mode != "rgb_array":
@@ -189,10 +148,6 @@ class ApartmentEnv(gym.Env):
         if self._renderer is not None:
             self._renderer.close()
             self._renderer = None
-
-
-def _wrap(angle: float) -> float:
-    return (angle + math.pi) % (2 * math.pi) - math.pi
 
 
 __all__ = ["CORRIDOR", "MOVE_FORWARD", "TURN_LEFT", "TURN_RIGHT", "ApartmentEnv"]

@@ -12,7 +12,7 @@ from typing import Optional
 
 import numpy as np
 
-from sb3_disagree.envs.apartment import MOVE_FORWARD, TURN_LEFT, TURN_RIGHT
+from sb3_disagree.envs.navigation import MOVE_FORWARD, TURN_LEFT, TURN_RIGHT, wrap
 from sb3_disagree.envs.grid import GridField
 from sb3_disagree.envs.layout import Layout
 
@@ -101,7 +101,7 @@ class GridExpert:
         tx, tz = self.field.waypoint(x, z, self.lookahead)
         if math.hypot(tx - x, tz - z) < 1e-6:
             tx, tz = self.gx, self.gz
-        misalignment = abs(_wrap(math.atan2(-(tz - z), tx - x) - heading))
+        misalignment = abs(wrap(math.atan2(-(tz - z), tx - x) - heading))
         # In steps: forward steps to cover the distance, turn steps to face the path.
         return self.field.cost(x, z) / e.forward_step + misalignment / e.turn_step
 
@@ -163,8 +163,4 @@ ApartmentExpert = GridExpert  # the apartment's expert is the grid expert
 
 
 def _pose_key(x: float, z: float, heading: float) -> tuple[int, int, int]:
-    return round(x * 100), round(z * 100), round(math.degrees(_wrap(heading))) % 360
-
-
-def _wrap(angle: float) -> float:
-    return (angle + math.pi) % (2 * math.pi) - math.pi
+    return round(x * 100), round(z * 100), round(math.degrees(wrap(heading))) % 360

@@ -14,12 +14,11 @@ from functools import lru_cache
 from pathlib import Path
 from typing import Any, Optional, Union
 
-import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
-from sb3_disagree.envs.apartment import MOVE_FORWARD, TURN_LEFT, TURN_RIGHT
 from sb3_disagree.envs.grid import GridField
+from sb3_disagree.envs.navigation import MOVE_FORWARD, TURN_LEFT, TURN_RIGHT, NavigationEnv
 from sb3_disagree.envs.mesh_scene import NavGrid, SceneGoals, goals_path, load_meshes, navigable_grid
 
 DEFAULT_SCENE = Path(__file__).resolve().parent / "scenes" / "office.glb"
@@ -41,7 +40,7 @@ def _field(path: str, cell: float, agent_radius: float, x: float, z: float, radi
     return GridField(grid.eroded(margin), np.hypot(gx - x, gz - z) < radius - 0.05, grid.x0, grid.z0, grid.cell)
 
 
-class ScanEnv(gym.Env):
+class ScanEnv(NavigationEnv):
     """
     Reach a named goal in a scene mesh from a random navigable start.
 
@@ -111,9 +110,7 @@ class ScanEnv(gym.Env):
         else:
             self.observation_space = spaces.Box(-1.0, 1.0, (4,), dtype=np.float32)
         self._renderer = None
-        self._expert = None
-        self.x = self.z = self.heading = 0.0
-        self.step_count = 0
+        self._init_pose()
 
     @property
     def renderer(self):
@@ -156,51 +153,13 @@ class ScanEnv(gym.Env):
             "is_success": success,
         }
 
-    def set_pose(self, x: float, z: float, heading: float) -> None:
-        """Put the agent at a pose (for tests, pictures and the expert); the episode goes on from there."""
-        self.x, self.z, self.heading = float(x), float(z), float(heading)
-
-    def _reached(self) -> bool:
+    def reached(self) -> bool:
         return math.hypot(self.goal.x - self.x, self.goal.z - self.z) < self.goal.radius
 
-    def reset(self, *, seed: Optional[int] = None, options: Optional[dict] = None) -> tuple[np.ndarray, dict]:
-        super().reset(seed=seed)
+    def _sample_pose(self) -> tuple[float, float, float]:
         i, j = self._starts[self.np_random.integers(len(self._starts))]
         x, z = self.field.point(int(i), int(j))
-        self.set_pose(x, z, self.np_random.uniform(-math.pi, math.pi))
-        self.step_count = 0
-        self.path = [(self.x, self.z)]
-        return self._obs(), self._info()
-
-    def step(self, action: int) -> tuple[np.ndarray, float, bool, bool, dict]:
-        action = int(action)
-        if not self.action_space.contains(action):
-            raise ValueError(f"invalid action {action}; actions are 0 turn left, 1 turn right, 2 move forward")
-        before = self.distance
-        if action == TURN_LEFT:
-            self.heading = _wrap(self.heading + self.turn_step)
-        elif action == TURN_RIGHT:
-            self.heading = _wrap(self.heading - self.turn_step)
-        else:
-            x = self.x + self.forward_step * math.cos(self.heading)
-            z = self.z - self.forward_step * math.sin(self.heading)
-            # A step (0.25 m) is shorter than any wall's blocked band (its thickness plus twice the radius).
-            if not self.blocked(x, z):
-                self.x, self.z = x, z
-        self.step_count += 1
-        self.path.append((self.x, self.z))
-        success = self._reached()
-        reward = before - self.distance - self.step_penalty + (self.success_reward if success else 0.0)
-        truncated = not success and self.step_count >= self.max_episode_steps
-        return self._obs(), reward, success, truncated, self._info(success)
-
-    def expert_action(self) -> int:
-        """The shortest-path expert's action for the current state (what DAgger labels with)."""
-        if self._expert is None:
-            from sb3_disagree.envs.expert import GridExpert
-
-            self._expert = GridExpert(self)
-        return self._expert.planned_action(self.x, self.z, self.heading)
+        return x, z, self.np_random.uniform(-math.pi, math.pi)
 
     def render(self) -> Optional[np.ndarray]:
         if self.render_mode != "rgb_array":
@@ -211,10 +170,6 @@ class ScanEnv(gym.Env):
         if self._renderer is not None:
             self._renderer.close()
             self._renderer = None
-
-
-def _wrap(angle: float) -> float:
-    return (angle + math.pi) % (2 * math.pi) - math.pi
 
 
 __all__ = ["DEFAULT_SCENE", "MOVE_FORWARD", "TURN_LEFT", "TURN_RIGHT", "ScanEnv"]
