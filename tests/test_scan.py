@@ -143,3 +143,20 @@ def test_every_goal_of_the_shipped_office_is_reachable():
         expert = GridExpert(env)
         for seed in range(5):
             assert _expert_succeeds(env, expert, seed), (goal, seed)
+
+
+def test_the_method_runs_on_the_office_end_to_end(tmp_path):
+    from typer.testing import CliRunner
+
+    from sb3_disagree.cli.app import app
+
+    runner, env_id, zoo = CliRunner(), "sb3_disagree/OfficeState-v0", tmp_path / "zoo"
+    for goal in ("sofa", "fridge"):
+        r = runner.invoke(app, ["priors", "train", "--goal", goal, "--env", env_id, "--zoo", str(zoo), "--rounds", "1",
+                                "--steps-per-round", "200", "--epochs", "1", "--episodes", "2"])
+        assert r.exit_code == 0, r.output
+    r = runner.invoke(app, ["train", "--goal", "table", "--env", env_id, "--zoo", str(zoo), "--out", str(tmp_path / "runs"),
+                            "--steps", "400", "--n-envs", "2", "--mode", "room-sensor"])
+    assert r.exit_code == 0, r.output
+    assert "priors: sofa" in r.output or "priors: fridge" in r.output
+    assert (tmp_path / "runs" / "sb3_disagree__OfficeState-v0" / "table" / "room-sensor-0" / "model.zip").exists()
