@@ -26,9 +26,10 @@ def main() -> None:
             f"{size / 1e6:.1f} MB | {'ok' if not e.problem else e.problem} |"
         )
     body = (
-        "Read from the cards by `python benchmarks/zoo_table.py`. Success: the prior alone from "
-        "random corridor starts, actions sampled from its distribution as the method follows priors, "
-        "over the episodes on the card (seeds 10000+). Each card keeps the command that made the prior.\n\n"
+        "Read from the cards by `python benchmarks/zoo_table.py`. Success: the prior alone from its env's "
+        "start distribution (the apartment: random corridor poses; the office: random poses anywhere on the "
+        "floor), actions sampled from its distribution as the method follows priors, over the episodes on "
+        "the card (seeds 10000+). Each card keeps the command that made the prior.\n\n"
         "| goal | env | method | labelled steps | success | mean length | size | status |\n"
         "|---|---|---|---|---|---|---|---|\n" + "\n".join(rows) + f"\n\nTotal size: {total / 1e6:.1f} MB.\n"
     )
