@@ -107,7 +107,7 @@ def plot(experiment: Experiment, grid: np.ndarray, summaries: list[CellSummary],
     ax1, ax2 = axes[0, 0], axes[0, 1]
     colors = plt.get_cmap("tab10")
     for i, s in enumerate(summaries):
-        ax1.plot(grid, s.mean, color=colors(i), label=f"{s.cell} ({len(s.seeds)} seeds)")
+        ax1.plot(grid, s.mean, color=colors(i), label=f"{s.cell} ({len(s.seeds)} seed{'s' if len(s.seeds) > 1 else ''})")
         ax1.fill_between(grid, np.clip(s.low, 0, 1), np.clip(s.high, 0, 1), color=colors(i), alpha=0.2)
         if len(s.alone_steps):
             ax1.plot(s.alone_steps, s.alone_mean, "--o", color=colors(i), markersize=3, linewidth=1)
