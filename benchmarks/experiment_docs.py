@@ -1,0 +1,49 @@
+"""
+An experiment's report into the docs: the figure into docs/images/NAME.png and the table, with the
+commands, seeds, budget and machine, into the NAME section of docs/results.md.
+
+    dopt experiment run NAME --jobs 2 [--seeds 0,1,2]
+    python benchmarks/experiment_docs.py NAME
+"""
+
+import os
+import platform
+import sys
+from pathlib import Path
+
+import yaml
+from docs_section import DOCS, write_section
+
+from sb3_disagree.experiments.report import plot, summarize, table_markdown
+from sb3_disagree.experiments.spec import load_experiment
+
+ROOT = Path(__file__).resolve().parent / "results" / "experiments"
+
+
+def main(name: str) -> None:
+    experiment = load_experiment(name)
+    root = ROOT / experiment.name
+    grid, summaries = summarize(experiment, root)
+    if not summaries:
+        sys.exit(f"no finished runs of {name} under {root}")
+    figure = DOCS / "images" / f"{experiment.name}.png"
+    plot(experiment, grid, summaries, figure, root)
+    seeds = sorted({s for c in summaries for s in c.seeds})
+    acer = summaries[0].records[0]["config"]["acer_kwargs"]
+    body = (f"Commands: `dopt experiment run {name} --jobs 2 --seeds {','.join(map(str, seeds))}` then "
+            f"`python benchmarks/experiment_docs.py {name}` (grid: `benchmarks/experiments/{name}.yaml`). "
+            f"Seeds {', '.join(map(str, seeds))}; {experiment.steps:,} env steps per run; {platform.machine()}, "
+            f"{os.cpu_count()} cores, two runs at a time, one torch thread each. ACER: "
+            f"{yaml.safe_dump(acer, default_flow_style=True, width=200).strip()}.\n\n"
+            f"![{experiment.name}](images/{figure.name})\n\n{table_markdown(experiment, summaries)}\n\n"
+            "Solid lines: training success (the last 50 episodes over all envs, priors included where they were "
+            "followed), mean over seeds with a 95% t-interval; dashed: the new policy alone (no priors, sampled "
+            "actions, 20 episodes every 20k steps). Table: steps to 50%/90% and success at the budgets read from "
+            "the mean training curve; AUC is the mean of that curve over the run; the new policy alone (final) is "
+            f"evaluated over {experiment.final_episodes} episodes after training, per seed in brackets.\n")
+    write_section(experiment.name, f"{experiment.name}: {experiment.goal}", body, page="results.md")
+    print(body)
+
+
+if __name__ == "__main__":
+    main(sys.argv[1])
