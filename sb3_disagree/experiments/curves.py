@@ -63,12 +63,12 @@ def mean_and_band(curves: Sequence[np.ndarray]) -> tuple[np.ndarray, np.ndarray,
     import warnings
 
     c = np.array(curves, dtype=float)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", RuntimeWarning)  # steps where no seed has a value yet stay nan
-        mean = np.nanmean(c, axis=0)
     n = np.sum(~np.isnan(c), axis=0)
-    sem = np.nanstd(c, axis=0, ddof=1) / np.sqrt(np.maximum(n, 1)) if len(c) > 1 else np.zeros_like(mean)
-    half = np.where(n > 1, stats.t.ppf(0.975, np.maximum(n - 1, 1)) * sem, 0.0)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # steps where fewer than two seeds have a value
+        mean = np.nanmean(c, axis=0)
+        sem = np.nanstd(c, axis=0, ddof=1) / np.sqrt(np.maximum(n, 1)) if len(c) > 1 else np.zeros_like(mean)
+    half = np.where(n > 1, stats.t.ppf(0.975, np.maximum(n - 1, 1)) * np.nan_to_num(sem), 0.0)
     return mean, mean - half, mean + half
 
 
