@@ -1,5 +1,6 @@
 """Training curves read back from run folders (SB3 Monitor files and progress.csv)."""
 
+import warnings
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Optional
@@ -57,10 +58,8 @@ def progress_curve(run_dir: Path, key: str, grid: np.ndarray, smooth: int = 1) -
 
 
 def mean_and_band(curves: Sequence[np.ndarray]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Mean over seeds and a 95% band (t-interval of the mean; the range for a single seed)."""
+    """Mean over seeds and a 95% band (t-interval of the mean; no band where only one seed has a value)."""
     from scipy import stats
-
-    import warnings
 
     c = np.array(curves, dtype=float)
     n = np.sum(~np.isnan(c), axis=0)
