@@ -103,8 +103,12 @@ def plot(experiment: Experiment, grid: np.ndarray, summaries: list[CellSummary],
     import matplotlib.pyplot as plt
 
     n_paths = len(summaries) if experiment.trajectories else 0
-    fig, axes = plt.subplots(1, 2 + n_paths, figsize=(5.5 * (2 + n_paths), 4.2), squeeze=False)
-    ax1, ax2 = axes[0, 0], axes[0, 1]
+    # Curves on the first row; with trajectories, one map per cell on a second row.
+    fig = plt.figure(figsize=(11, 4.2 if not n_paths else 4.2 + 3.6))
+    grid_spec = fig.add_gridspec(2 if n_paths else 1, max(n_paths, 2) * 2 if n_paths else 2)
+    half = grid_spec.ncols // 2
+    ax1, ax2 = fig.add_subplot(grid_spec[0, :half]), fig.add_subplot(grid_spec[0, half:])
+    path_axes = [fig.add_subplot(grid_spec[1, 2 * j:2 * j + 2]) for j in range(n_paths)]
     colors = plt.get_cmap("tab10")
     for i, s in enumerate(summaries):
         ax1.plot(grid, s.mean, color=colors(i), label=f"{s.cell} ({len(s.seeds)} seed{'s' if len(s.seeds) > 1 else ''})")
@@ -122,8 +126,8 @@ def plot(experiment: Experiment, grid: np.ndarray, summaries: list[CellSummary],
         len(s.alone_steps) for s in summaries) else None, title_fontsize=7)
     if ax2.lines:
         ax2.legend(loc="upper right", fontsize=8)
-    for j, s in enumerate(summaries[:n_paths]):
-        _draw_path(axes[0, 2 + j], experiment, root / s.cell / f"seed-{s.seeds[0]}", s.cell)
+    for ax, s in zip(path_axes, summaries):
+        _draw_path(ax, experiment, root / s.cell / f"seed-{s.seeds[0]}", s.cell)
     fig.tight_layout()
     out.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(out, dpi=100)
