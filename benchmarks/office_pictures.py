@@ -17,7 +17,8 @@ import numpy as np
 from PIL import Image
 
 from sb3_disagree.envs.expert import GridExpert
-from sb3_disagree.envs.scan import ScanEnv
+from sb3_disagree.envs.mesh_scene import SceneGoals, goals_path
+from sb3_disagree.envs.scan import DEFAULT_SCENE, ScanEnv
 
 OUT = Path(__file__).resolve().parent.parent / "docs" / "images"
 # (name, x, z, heading in degrees)
@@ -77,11 +78,9 @@ def pictures() -> None:
 
 
 def speed(steps: int, episodes: int) -> str:
-    import torch as th
-
-    th.set_num_threads(1)
-    rows = []
     from sb3_disagree.envs import scan
+
+    rows = []
 
     for obs in ("rgb", "state"):
         scan._scene.cache_clear()  # time the scene's loading and the grid's derivation too
@@ -102,7 +101,7 @@ def speed(steps: int, episodes: int) -> str:
         rows.append(f"| {obs} | {rate:,.0f} | {created:.1f} |")
         env.close()
     goals = []
-    for goal in ScanEnv(goal="table", obs="state").scene_goals.goals:
+    for goal in SceneGoals.load(goals_path(DEFAULT_SCENE)).goals:
         env = ScanEnv(goal=goal, obs="state")
         expert, lengths, successes = GridExpert(env), [], 0
         for seed in range(episodes):

@@ -45,14 +45,10 @@ def acer_rate(mode: str, steps: int, warm: int, vec_env: str) -> float:
 
 def ppo_rate(steps: int, warm: int, vec_env: str) -> float:
     from stable_baselines3 import PPO
-    from stable_baselines3.common.env_util import make_vec_env
-    from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv
-    import functools
 
-    from sb3_disagree.envs import make
+    from sb3_disagree.training import RunConfig, build_env
 
-    env = make_vec_env(functools.partial(make, "sb3_disagree/Apartment-v0"), n_envs=4, seed=0,
-                       env_kwargs=dict(goal="bathtub"), vec_env_cls=SubprocVecEnv if vec_env == "subproc" else DummyVecEnv)
+    env = build_env(RunConfig(goal="bathtub", vec_env=vec_env), None)  # the envs dopt train makes
     # rl-zoo3's Atari settings for PPO, with 4 envs.
     model = PPO("CnnPolicy", env, n_steps=128, n_epochs=4, batch_size=256, learning_rate=2.5e-4, clip_range=0.1,
                 ent_coef=0.01, vf_coef=0.5, seed=0)

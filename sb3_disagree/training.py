@@ -152,20 +152,20 @@ class RecordTrajectories(BaseCallback):
 
 
 def build_env(config: RunConfig, run_dir: Optional[Path], n_envs: Optional[int] = None, seed: Optional[int] = None,
-              vec_env: str = "dummy"):
-    """The VecEnv of a run (Monitor files under ``run_dir/monitor`` when given)."""
+              vec_env: Optional[str] = None):
+    """The VecEnv of a run (Monitor files under ``run_dir/monitor`` when given); ``n_envs``, ``seed`` and
+    ``vec_env`` override the config's."""
     import functools
 
-    from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv
-
     from gymnasium.envs.registration import registry
+    from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv
 
     from sb3_disagree.envs import make
 
     if config.env_id not in registry:
         ours = ", ".join(k for k in registry if k.startswith("sb3_disagree/"))
         raise ValueError(f"unknown environment {config.env_id!r}; this package registers {ours}")
-    subproc = vec_env == "subproc"
+    subproc = (vec_env or config.vec_env) == "subproc"
     return make_vec_env(functools.partial(make, config.env_id), n_envs=n_envs or config.n_envs,
                         seed=config.seed if seed is None else seed,
                         monitor_dir=str(run_dir / "monitor") if run_dir else None,
@@ -180,7 +180,7 @@ def evaluation_callback(config: RunConfig, run_dir: Path) -> EvalCallback:
     from stable_baselines3.common.preprocessing import is_image_space, is_image_space_channels_first
     from stable_baselines3.common.vec_env import VecTransposeImage
 
-    eval_env = build_env(config, None, n_envs=min(config.n_envs, 4), seed=config.seed + 10_000)
+    eval_env = build_env(config, None, n_envs=min(config.n_envs, 4), seed=config.seed + 10_000, vec_env="dummy")
     space = eval_env.observation_space
     if is_image_space(space) and not is_image_space_channels_first(space):
         eval_env = VecTransposeImage(eval_env)  # as ACER wraps the training env
@@ -211,7 +211,7 @@ def train(config: RunConfig, out: Path = Path("runs"), resume: Optional[Path] = 
     config.validate()
     run_dir = Path(resume or run_dir or config.run_dir(Path(out)))
     run_dir.mkdir(parents=True, exist_ok=True)
-    env = build_env(config, run_dir, vec_env=config.vec_env)
+    env = build_env(config, run_dir)
     behaviour, prior_names, sims = None, [], []
     if config.mode != "scratch":
         prior_names, sims, priors = choose_priors(config, env)

@@ -17,7 +17,6 @@ from sb3_disagree.envs.layout import CORRIDOR, Layout, default_layout
 from sb3_disagree.envs.navigation import MOVE_FORWARD, TURN_LEFT, TURN_RIGHT, NavigationEnv
 
 
-
 class ApartmentEnv(NavigationEnv):
     """
     Navigate from a random pose in the corridor to one goal object.
@@ -122,9 +121,6 @@ class ApartmentEnv(NavigationEnv):
         from sb3_disagree.envs.expert import _field
 
         return _field(self.layout, self.goal.name, self.reach)
-
-    def reached(self) -> bool:
-        return self.distance < self.reach
 
     def _sample_pose(self) -> tuple[float, float, float]:
         c, r = self.layout.corridor, self.layout.agent_radius

@@ -1,6 +1,7 @@
 """
-A scripted expert for the apartment: it knows the layout, plans the shortest way to the goal on a
-grid of free space (through the corridor and doorways), and drives the agent down that distance field.
+The scripted expert of the navigation tasks: it plans the shortest way to the goal on a grid of free
+space (the apartment's corridor and doorways, or a scan's navigable area) and drives the agent down
+that distance field.
 
 It is what imitation-learned priors are trained from, and the yardstick for how many steps a good
 policy needs.
@@ -12,9 +13,10 @@ from typing import Optional
 
 import numpy as np
 
-from sb3_disagree.envs.navigation import MOVE_FORWARD, TURN_LEFT, TURN_RIGHT, wrap
 from sb3_disagree.envs.grid import GridField
 from sb3_disagree.envs.layout import Layout
+from sb3_disagree.envs.navigation import MOVE_FORWARD, TURN_LEFT, TURN_RIGHT, wrap
+
 
 class DistanceField(GridField):
     """

@@ -22,7 +22,7 @@ class NavigationEnv(gym.Env):
     """
     A goal-reaching task on a pose. Subclasses set ``forward_step``, ``turn_step`` (radians),
     ``step_penalty``, ``success_reward``, ``max_episode_steps`` and ``reach``, and define
-    ``distance`` (what the reward follows), ``reached()``, ``blocked(x, z)``, ``goal_xz``,
+    ``distance`` (what the reward follows), ``blocked(x, z)``, ``goal_xz``,
     ``nav_field()``, ``_sample_pose()``, ``_obs()`` and ``_info(success)``.
     """
 
@@ -48,7 +48,9 @@ class NavigationEnv(gym.Env):
         raise NotImplementedError
 
     def reached(self) -> bool:
-        raise NotImplementedError
+        """Within ``reach`` of the goal point in a straight line (whatever distance the reward follows)."""
+        gx, gz = self.goal_xz
+        return math.hypot(gx - self.x, gz - self.z) < self.reach
 
     def blocked(self, x: float, z: float) -> bool:
         raise NotImplementedError

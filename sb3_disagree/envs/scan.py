@@ -18,8 +18,8 @@ import numpy as np
 from gymnasium import spaces
 
 from sb3_disagree.envs.grid import GridField
-from sb3_disagree.envs.navigation import MOVE_FORWARD, TURN_LEFT, TURN_RIGHT, NavigationEnv
 from sb3_disagree.envs.mesh_scene import NavGrid, SceneGoals, goals_path, load_meshes, navigable_grid
+from sb3_disagree.envs.navigation import MOVE_FORWARD, TURN_LEFT, TURN_RIGHT, NavigationEnv
 
 DEFAULT_SCENE = Path(__file__).resolve().parent / "scenes" / "office.glb"
 
@@ -152,9 +152,6 @@ class ScanEnv(NavigationEnv):
             "distance": self.distance,
             "is_success": success,
         }
-
-    def reached(self) -> bool:
-        return math.hypot(self.goal.x - self.x, self.goal.z - self.z) < self.goal.radius
 
     def _sample_pose(self) -> tuple[float, float, float]:
         i, j = self._starts[self.np_random.integers(len(self._starts))]

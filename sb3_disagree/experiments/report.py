@@ -53,8 +53,9 @@ def summarize(experiment: Experiment, root: Path) -> tuple[np.ndarray, list[Cell
     """Read every finished run of the experiment under ``root`` and summarise each cell."""
     grid = np.linspace(experiment.steps / GRID_POINTS, experiment.steps, GRID_POINTS)
     summaries = []
+    finished = [r for r in experiment.runs() if r.finished(root)]
     for cell in experiment.cells:
-        runs = [r for r in experiment.runs() if r.cell == cell and r.finished(root)]
+        runs = [r for r in finished if r.cell == cell]
         if not runs:
             continue
         folders = [r.folder(root) for r in runs]
@@ -69,12 +70,13 @@ def summarize(experiment: Experiment, root: Path) -> tuple[np.ndarray, list[Cell
             i = int(np.searchsorted(grid, b, side="right")) - 1
             at[b] = float(mean[i]) if i >= 0 else float("nan")
         alone = [r["final_alone"]["success_rate"] for r in records]
+        alone_steps, alone_mean = alone_curve(folders)
         summaries.append(CellSummary(
             cell=cell, seeds=[r.seed for r in runs], mean=mean, low=low, high=high, usage=usage,
             steps_to_50=steps_to(mean, grid, 0.5), steps_to_90=steps_to(mean, grid, 0.9), at_budgets=at,
             auc=float(np.mean(np.nan_to_num(mean, nan=0.0))), final_alone=float(np.mean(alone)),
             final_alone_seeds=alone, fps=float(np.mean([r["fps"] for r in records])), records=records,
-            alone_steps=alone_curve(folders)[0], alone_mean=alone_curve(folders)[1]))
+            alone_steps=alone_steps, alone_mean=alone_mean))
     return grid, summaries
 
 

@@ -21,6 +21,10 @@ class PriorSet:
         for prior in self.priors:
             prior.policy.set_training_mode(False)
             prior.policy.requires_grad_(False)
+        # Priors with equal observation spaces share one conversion of each batch: per prior, the first
+        # prior whose space equals its own (decided once here, not per step).
+        spaces = [p.policy.observation_space for p in self.priors]
+        self._converter = [next(j for j in range(i + 1) if spaces[j] == spaces[i]) for i in range(len(spaces))]
 
     def __len__(self) -> int:
         return len(self.priors)
@@ -39,10 +43,9 @@ class PriorSet:
         :return: pi_i(.|s) for every prior, shape (k, n_envs, n_actions)
         """
         out, converted = [], {}
-        for prior in self.priors:
-            # Priors with the same observation space share one conversion of the batch.
-            key = (str(prior.policy.observation_space), str(prior.device))
-            if key not in converted:
-                converted[key] = prior.policy.obs_to_tensor(observations)[0]
-            out.append(prior.policy.get_distribution(converted[key]).distribution.probs)
+        for prior, j in zip(self.priors, self._converter):
+            if j not in converted:
+                converted[j] = prior.policy.obs_to_tensor(observations)[0]
+            obs = converted[j].to(prior.policy.device)
+            out.append(prior.policy.get_distribution(obs).distribution.probs)
         return th.stack(out)
