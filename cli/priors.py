@@ -15,6 +15,8 @@ app = typer.Typer(help="The prior zoo: list, show, add, remove, evaluate and tra
 
 ZOO_OPT = typer.Option(None, "--zoo", help="Zoo folder (default: the shipped zoo).")
 ENV_OPT = typer.Option(DEFAULT_ENV, "--env", help="Gymnasium id of the environment.")
+# The card's evaluation episodes start at this env seed: above any seed a prior trains on.
+CARD_SEED = 10_000
 EMB_OPT = typer.Option(None, "--embedding", help="Word vectors (word2vec/GloVe/fastText/KeyedVectors); default MiniLM.")
 
 
@@ -113,24 +115,25 @@ def eval_prior(
     episodes: int = typer.Option(100, "--episodes"),
     deterministic: bool = typer.Option(False, "--deterministic/--stochastic",
                                        help="Greedy actions, or sampled as the method follows priors."),
-    seed: int = typer.Option(10_000, "--seed"),
+    seed: int = typer.Option(CARD_SEED, "--seed", help="Seed of the first env; the card's episodes start at 10000."),
+    record: bool = typer.Option(False, "--record", help="Write this evaluation on the prior's card (sampled actions only)."),
     env: str = ENV_OPT,
     zoo: Optional[Path] = ZOO_OPT,
 ) -> None:
     """Evaluate a prior alone from the environment's start distribution."""
     with clean_errors():
-        from sb3_disagree.prior_training import evaluate, make_env
-
+        if record and deterministic:
+            raise ValueError("--record keeps the card's evaluation as the method uses priors: with sampled actions; "
+                             "drop --deterministic")
         z = _zoo(zoo)
         entry = z.get(goal, env)
-        venv = make_env(env, goal, entry.card.env_kwargs if entry.card else {}, n_envs=4, seed=seed)
-        model = z.load(entry, venv, device="cpu")
-        with _progress() as progress:
-            task = progress.add_task(f"evaluating {goal}", total=episodes)
-            result = evaluate(model, venv, episodes, deterministic, lambda n: progress.update(task, completed=n))
+        result = _evaluate(z, entry, episodes, deterministic, seed)
         console.print(f"{goal}: success {result.success_rate:.2f}, mean length {result.mean_length:.1f}, "
                       f"mean return {result.mean_return:.2f} over {episodes} episodes "
                       f"({'greedy' if deterministic else 'sampled'} actions)")
+        if record:
+            z.record_evaluation(entry, {**result.as_dict(), "seed": seed})
+            console.print(f"recorded on {entry.path / 'card.json'}")
 
 
 @app.command()
@@ -176,20 +179,23 @@ def train(
         _evaluate_into_card(z, entry, episodes)
 
 
-def _evaluate_into_card(z, entry, episodes: int) -> None:
-    """Evaluate a new entry with sampled actions (as the method follows priors) and record it on its card."""
-    from dataclasses import asdict
-
+def _evaluate(z, entry, episodes: int, deterministic: bool, seed: int):
+    """Run a zoo entry alone for some episodes on 4 envs seeded from ``seed``."""
     from sb3_disagree.prior_training import evaluate, make_env
-    from sb3_disagree.zoo import CARD
 
-    venv = make_env(entry.env_id, entry.goal, entry.card.env_kwargs, n_envs=4, seed=10_000)
+    venv = make_env(entry.env_id, entry.goal, entry.card.env_kwargs if entry.card else {}, n_envs=4, seed=seed)
     model = z.load(entry, venv, device="cpu")
     with _progress() as progress:
         task = progress.add_task(f"evaluating {entry.goal}", total=episodes)
-        result = evaluate(model, venv, episodes, deterministic=False, progress=lambda n: progress.update(task, completed=n))
-    entry.card.evaluation = result.as_dict()
-    (entry.path / CARD).write_text(json.dumps(asdict(entry.card), indent=2) + "\n")
+        result = evaluate(model, venv, episodes, deterministic, lambda n: progress.update(task, completed=n))
+    venv.close()
+    return result
+
+
+def _evaluate_into_card(z, entry, episodes: int) -> None:
+    """Evaluate a new entry with sampled actions (as the method follows priors) and record it on its card."""
+    result = _evaluate(z, entry, episodes, deterministic=False, seed=CARD_SEED)
+    z.record_evaluation(entry, {**result.as_dict(), "seed": CARD_SEED})
     console.print(f"{entry.goal}: success {result.success_rate:.2f} over {episodes} episodes, "
                   f"mean length {result.mean_length:.1f}")
 

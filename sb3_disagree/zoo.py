@@ -289,6 +289,24 @@ class Zoo:
                 shutil.rmtree(tmp)
         return self._read(target, env_id)
 
+    def record_evaluation(self, entry: Entry, evaluation: dict[str, Any]) -> Entry:
+        """
+        Replace the evaluation on an entry's card, atomically (the model file is left as it is).
+
+        :param entry: A usable entry
+        :param evaluation: success_rate, episodes, mean_length, ... of the new evaluation
+        :return: The entry as read back
+        """
+        if entry.card is None or entry.problem is not None:
+            raise ZooError(f"prior {entry.goal!r}: cannot record an evaluation on an unusable entry ({entry.problem})")
+        entry.card.evaluation = dict(evaluation)
+        fd, tmp = tempfile.mkstemp(prefix=f".{CARD}-", dir=entry.path)
+        with os.fdopen(fd, "w") as f:
+            f.write(json.dumps(asdict(entry.card), indent=2) + "\n")
+        os.chmod(tmp, 0o644)
+        os.replace(tmp, entry.path / CARD)
+        return self._read(entry.path, entry.env_id)
+
     def remove(self, goal: str, env_id: str) -> None:
         entry = self.get(goal, env_id)
         trash = entry.path.with_name(f".{entry.path.name}-removed")

@@ -129,6 +129,21 @@ def test_cli_add_show_eval_remove(zoo, model_files):
     assert result.exit_code == 0 and "stove" not in [e.goal for e in zoo.entries()]
 
 
+def test_cli_eval_record_rewrites_only_the_evaluation(zoo):
+    args = ["--zoo", str(zoo.root), "--env", STATE_ID]
+    before = zoo.get("bed", STATE_ID)
+    result = runner.invoke(app, ["priors", "eval", "bed", "--episodes", "3", "--seed", "123", "--record", *args])
+    assert result.exit_code == 0, result.output
+    after = zoo.get("bed", STATE_ID)
+    assert after.problem is None and after.card.sha256 == before.card.sha256
+    assert after.card.evaluation["episodes"] == 3 and after.card.evaluation["seed"] == 123
+    assert after.card.training == before.card.training and after.card.command == before.card.command
+    assert [p.name for p in after.path.iterdir() if p.name.startswith(".")] == []  # no temporary file left
+    result = runner.invoke(app, ["priors", "eval", "bed", "--episodes", "3", "--record", "--deterministic", *args])
+    assert result.exit_code == 2 and "sampled actions" in result.output
+    assert zoo.get("bed", STATE_ID).card.evaluation["seed"] == 123
+
+
 def test_cli_train_dagger_tiny(tmp_path):
     result = runner.invoke(app, ["priors", "train", "--goal", "toilet", "--method", "dagger", "--env", STATE_ID,
                                  "--zoo", str(tmp_path), "--rounds", "2", "--steps-per-round", "200", "--epochs", "1",
