@@ -15,8 +15,9 @@ app = typer.Typer(help="The prior zoo: list, show, add, remove, evaluate and tra
 
 ZOO_OPT = typer.Option(None, "--zoo", help="Zoo folder (default: the shipped zoo).")
 ENV_OPT = typer.Option(DEFAULT_ENV, "--env", help="Gymnasium id of the environment.")
-# The card's evaluation episodes start at this env seed: above any seed a prior trains on.
-CARD_SEED = 10_000
+# The card's evaluation episodes start at this env seed, DAgger's validation episodes at the second:
+# neither meets the starts a prior trains on, nor each other.
+CARD_SEED, VALIDATION_SEED = 10_000, 20_000
 EMB_OPT = typer.Option(None, "--embedding", help="Word vectors (word2vec/GloVe/fastText/KeyedVectors); default MiniLM.")
 
 
@@ -147,6 +148,9 @@ def train(
     epochs: int = typer.Option(6, "--epochs", help="DAgger passes over the data per round."),
     final_epochs: int = typer.Option(0, "--final-epochs", help="DAgger passes over all labels at the end, "
                                      "learning rate decayed to zero."),
+    validation_episodes: int = typer.Option(0, "--validation-episodes",
+                                            help="DAgger: evaluate each round's policy on this many episodes (env "
+                                            "seeds 20000+) and keep the best round's, not the last (0: the last)."),
     n_envs: int = typer.Option(4, "--n-envs"),
     seed: int = typer.Option(0, "--seed"),
     episodes: int = typer.Option(100, "--episodes", help="Evaluation episodes for the card."),
@@ -164,12 +168,16 @@ def train(
         z = _zoo(zoo)
         if not replace and any(e.goal == goal for e in z.entries(env)):
             raise ValueError(f"the zoo already has a prior for {goal!r} in {env}; pass --replace to retrain it")
+        if validation_episodes < 0:
+            raise ValueError(f"--validation-episodes must be >= 0, got {validation_episodes}")
         venv = make_env(env, goal, n_envs=n_envs, seed=seed)
         if method == "dagger":
+            validation_env = (make_env(env, goal, n_envs=n_envs, seed=VALIDATION_SEED) if validation_episodes else None)
             with _progress() as progress:
                 task = progress.add_task(f"DAgger {goal}", total=rounds)
                 model, record = train_dagger(venv, seed=seed, rounds=rounds, steps_per_round=steps_per_round,
-                                             epochs=epochs, final_epochs=final_epochs,
+                                             epochs=epochs, final_epochs=final_epochs, validation_env=validation_env,
+                                             validation_episodes=validation_episodes, validation_seed=VALIDATION_SEED,
                                              progress=lambda line: (progress.advance(task), console.print(line)))
         else:
             model, record = train_rl(venv, method, steps, seed=seed, progress_bar=True)

@@ -93,6 +93,9 @@ def train_dagger(
     learning_rate: float = 1e-3,
     max_episode_steps: int = 200,
     final_epochs: int = 0,
+    validation_env: Optional[VecEnv] = None,
+    validation_episodes: int = 0,
+    validation_seed: int = 20_000,
     progress: Optional[Callable[[str], None]] = None,
 ) -> tuple[ACER, dict[str, Any]]:
     """
@@ -110,6 +113,11 @@ def train_dagger(
     :param max_episode_steps: Rollouts restart after this many steps (a stuck learner teaches little more)
     :param final_epochs: Extra passes over the final aggregate with the learning rate decayed to zero
         (the per-round fits stop short of fitting the labels; these close the gap)
+    :param validation_env: Where each round's policy is evaluated when ``validation_episodes > 0``; the
+        policy of the round with the highest success is returned (DAgger's "best policy of the sequence"),
+        rather than the last one
+    :param validation_episodes: Episodes per validation (0: return the last round's policy)
+    :param validation_seed: Env seed of every validation, so that each round meets the same starts
     :param progress: Called with a line of text after each round
     :return: An ACER model whose policy imitates the expert, and a record of the training
     """
@@ -124,6 +132,8 @@ def train_dagger(
     obs = env.reset()
     ep_len = np.zeros(env.num_envs, dtype=int)
     start = time.perf_counter()
+    validation: list[float] = []
+    best: Optional[dict[str, th.Tensor]] = None
     for r in range(rounds):
         beta = 0.5 ** r  # probability of executing the expert's own action
         collected = 0
@@ -145,21 +155,36 @@ def train_dagger(
         x = np.concatenate(data_obs)
         y = np.concatenate(data_act)
         loss, accuracy = _fit(policy, optimizer, x, y, epochs, batch_size, rng)
+        line = f"round {r + 1}/{rounds}: {len(y)} labels, loss {loss:.3f}, accuracy {accuracy:.3f}"
+        if validation_env is not None and validation_episodes > 0:
+            validation_env.seed(validation_seed)
+            validation.append(evaluate(model, validation_env, validation_episodes, deterministic=False).success_rate)
+            if validation[-1] >= max(validation):  # ties go to the later round, which has seen more labels
+                best = {k: v.clone() for k, v in policy.net.state_dict().items()}
+            line += f", validation success {validation[-1]:.2f}"
         if progress:
-            progress(f"round {r + 1}/{rounds}: {len(y)} labels, loss {loss:.3f}, accuracy {accuracy:.3f}")
-    if final_epochs > 0:
+            progress(line)
+    record = {"method": "dagger", "steps": int(len(y)), "seed": seed, "rounds": rounds, "epochs": epochs,
+              "final_epochs": final_epochs}
+    if validation:
+        selected = int(np.flatnonzero(np.asarray(validation) == max(validation))[-1])
+        policy.net.load_state_dict(best)
+        record.update(validation_episodes=validation_episodes, validation_seed=validation_seed,
+                      validation_success=validation, selected_round=selected + 1)
+        if progress:
+            progress(f"kept round {selected + 1} (validation success {validation[selected]:.2f})")
+    if final_epochs > 0:  # from the kept round's policy
         schedule = th.optim.lr_scheduler.CosineAnnealingLR(optimizer, T_max=final_epochs)
         for _ in range(final_epochs):
             loss, accuracy = _fit(policy, optimizer, x, y, 1, batch_size, rng)
             schedule.step()
         if progress:
             progress(f"final {final_epochs} epochs: loss {loss:.3f}, accuracy {accuracy:.3f}")
+    record.update(final_loss=loss, final_accuracy=accuracy)
     # The average network starts where the imitated policy is, so that ACER fine-tuning begins consistent.
     policy.average_net.load_state_dict(policy.net.state_dict())
     model.num_timesteps = int(len(y))
-    record = {"method": "dagger", "steps": int(len(y)), "seed": seed, "rounds": rounds, "epochs": epochs,
-              "final_epochs": final_epochs,
-              "final_loss": loss, "final_accuracy": accuracy, "seconds": round(time.perf_counter() - start, 1)}
+    record["seconds"] = round(time.perf_counter() - start, 1)
     return model, record
 
 

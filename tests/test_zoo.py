@@ -147,14 +147,45 @@ def test_cli_eval_record_rewrites_only_the_evaluation(zoo):
 def test_cli_train_dagger_tiny(tmp_path):
     result = runner.invoke(app, ["priors", "train", "--goal", "toilet", "--method", "dagger", "--env", STATE_ID,
                                  "--zoo", str(tmp_path), "--rounds", "2", "--steps-per-round", "200", "--epochs", "1",
-                                 "--episodes", "4"])
+                                 "--episodes", "4", "--validation-episodes", "3"])
     assert result.exit_code == 0, result.output
     card = Zoo(tmp_path).get("toilet", STATE_ID).card
     assert card.training["method"] == "dagger" and card.training["steps"] == 400
     assert card.command.startswith("dopt ") and card.evaluation["episodes"] == 4
+    # The kept policy is the last round with the best validation success.
+    validation = card.training["validation_success"]
+    assert len(validation) == 2 and card.training["validation_episodes"] == 3
+    best = max(validation)
+    assert card.training["selected_round"] == max(i + 1 for i, v in enumerate(validation) if v == best)
+    assert f"kept round {card.training['selected_round']}" in result.output
 
 
 def test_similarity_command_and_heatmap(tmp_path):
     out = tmp_path / "sim.png"
     result = runner.invoke(app, ["similarity", "shower", "bathtub", "toilet", "--plot", str(out)])
     assert result.exit_code == 0 and "0.57" in result.output and out.stat().st_size > 1000
+
+
+def test_dagger_keeps_the_best_validated_round(monkeypatch):
+    """With validation, the returned policy is the best round's, not the last one's."""
+    import numpy as np
+    import torch as th
+
+    from sb3_disagree import prior_training
+
+    scores = iter([0.2, 0.9, 0.4])  # round 2 is the best
+    snapshots = []
+
+    def fake_evaluate(model, env, episodes, deterministic=False, progress=None):
+        snapshots.append({k: v.clone() for k, v in model.policy.net.state_dict().items()})
+        return prior_training.Evaluation(next(scores), 1.0, 0.0, episodes, deterministic)
+
+    monkeypatch.setattr(prior_training, "evaluate", fake_evaluate)
+    model, record = prior_training.train_dagger(_state_env("toilet"), seed=0, rounds=3, steps_per_round=40, epochs=1,
+                                                validation_env=_state_env("toilet"), validation_episodes=2)
+    assert record["selected_round"] == 2 and record["validation_success"] == [0.2, 0.9, 0.4]
+    kept = model.policy.net.state_dict()
+    assert all(th.equal(kept[k], snapshots[1][k]) for k in kept)
+    assert not all(th.equal(kept[k], snapshots[2][k]) for k in kept)  # the last round's policy differs
+    assert all(th.equal(v, model.policy.average_net.state_dict()[k]) for k, v in kept.items())
+    assert np.isfinite(record["final_loss"])
