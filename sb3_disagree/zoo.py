@@ -21,6 +21,8 @@ from typing import Any, Optional, Union
 
 from gymnasium import spaces
 
+from sb3_disagree.files import write_atomic
+
 CARD = "card.json"
 MODEL = "model.zip"
 DEFAULT_ZOO = Path(__file__).resolve().parent.parent / "zoo"
@@ -300,11 +302,7 @@ class Zoo:
         if entry.card is None or entry.problem is not None:
             raise ZooError(f"prior {entry.goal!r}: cannot record an evaluation on an unusable entry ({entry.problem})")
         entry.card.evaluation = dict(evaluation)
-        fd, tmp = tempfile.mkstemp(prefix=f".{CARD}-", dir=entry.path)
-        with os.fdopen(fd, "w") as f:
-            f.write(json.dumps(asdict(entry.card), indent=2) + "\n")
-        os.chmod(tmp, 0o644)
-        os.replace(tmp, entry.path / CARD)
+        write_atomic(entry.path / CARD, json.dumps(asdict(entry.card), indent=2) + "\n")
         return self._read(entry.path, entry.env_id)
 
     def remove(self, goal: str, env_id: str) -> None:

@@ -46,6 +46,9 @@ def test_run_report_and_skip_finished(zoo, tmp_path):
     records = [json.loads(p.read_text()) for p in sorted(out.glob("*/seed-0/result.json"))]
     assert sorted(r["cell"] for r in records) == ["beta-big", "disagreement", "scratch"]
     assert all(r["steps"] >= 320 and 0 <= r["final_alone"]["success_rate"] <= 1 for r in records)
+    # Written atomically, yet readable by others (a temporary file's private mode is not kept).
+    assert all(p.stat().st_mode & 0o777 == 0o644 for p in out.glob("*/seed-0/result.json"))
+    assert not list(out.glob("*/seed-0/.result.json.*"))
     # A huge beta follows the priors whenever the branch is entered; scratch never does.
     usage = {c: yaml.safe_load((out / c / "seed-0" / "config.yaml").read_text()) for c in ("beta-big", "scratch")}
     assert usage["beta-big"]["beta"] == 100.0 and usage["scratch"]["chosen_priors"] == []

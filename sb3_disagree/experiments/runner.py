@@ -17,16 +17,9 @@ from pathlib import Path
 from typing import Any, Optional
 
 from sb3_disagree.experiments.spec import RESULT, Experiment, Run
+from sb3_disagree.files import write_atomic
 
 BACKENDS = ("local", "ray")
-
-
-def _write_atomic(path: Path, data: bytes) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.")
-    with os.fdopen(fd, "wb") as f:
-        f.write(data)
-    os.replace(tmp, path)
 
 
 def train_and_evaluate(run: Run, folder: Path) -> dict[str, Any]:
@@ -52,7 +45,7 @@ def train_and_evaluate(run: Run, folder: Path) -> dict[str, Any]:
     result = {"cell": run.cell, "seed": run.seed, "steps": int(model.num_timesteps), "seconds": round(seconds, 1),
               "fps": round(model.num_timesteps / max(seconds, 1e-9), 1), "final_alone": alone.as_dict(),
               "config": asdict(run.config)}
-    _write_atomic(folder / RESULT, (json.dumps(result, indent=2) + "\n").encode())
+    write_atomic(folder / RESULT, (json.dumps(result, indent=2) + "\n").encode())
     return result
 
 
@@ -66,7 +59,7 @@ def _ray_task(run: Run) -> tuple[dict[str, Any], dict[str, bytes]]:
 
 def _unpack(folder: Path, files: dict[str, bytes]) -> None:
     for rel, data in sorted(files.items(), key=lambda kv: kv[0] == RESULT):  # result.json last
-        _write_atomic(folder / rel, data)
+        write_atomic(folder / rel, data)
 
 
 def run_experiment(

@@ -1,0 +1,27 @@
+"""Writing files so that a reader never sees half of one: a temporary file beside it, then a rename."""
+
+import os
+import tempfile
+from pathlib import Path
+from typing import Union
+
+
+def write_atomic(path: Union[str, Path], data: Union[bytes, str], mode: int = 0o644) -> None:
+    """
+    Replace ``path`` with ``data`` in one rename, so that an interrupted write leaves the old file or none.
+
+    :param path: The file to write (its folder is created)
+    :param data: Its contents; text is written as UTF-8
+    :param mode: Permissions of the new file (``mkstemp`` would leave it readable by its owner only)
+    """
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.")
+    try:
+        with os.fdopen(fd, "wb") as f:
+            f.write(data.encode() if isinstance(data, str) else data)
+        os.chmod(tmp, mode)
+        os.replace(tmp, path)
+    finally:
+        if os.path.exists(tmp):
+            os.remove(tmp)
