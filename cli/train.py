@@ -50,7 +50,8 @@ def train(
     priors: str = typer.Option("auto", "--priors", help="auto (by similarity), or goals: a,b"),
     alpha: int = typer.Option(10, "--alpha", help="Disagreement window."),
     beta: float = typer.Option(0.1, "--beta", help="Follow priors while the window's mean disagreement is below this."),
-    steps: int = typer.Option(100_000, "--steps", help="Env steps."),
+    steps: Optional[int] = typer.Option(None, "--steps", help="Env steps [default: 100000]; with --resume, the "
+                                        "run's new total (default: its saved one)."),
     seed: int = typer.Option(0, "--seed"),
     n_envs: int = typer.Option(4, "--n-envs"),
     embedding: Optional[Path] = typer.Option(None, "--embedding", help="Word vectors file (default: MiniLM)."),
@@ -69,7 +70,7 @@ def train(
 
         config = RunConfig(goal=goal, env_id=env, mode=mode,
                            priors="auto" if priors == "auto" else [p.strip() for p in priors.split(",") if p.strip()],
-                           alpha=alpha, beta=beta, steps=steps, seed=seed, n_envs=n_envs,
+                           alpha=alpha, beta=beta, steps=steps or 100_000, seed=seed, n_envs=n_envs,
                            eval_every=eval_every, eval_episodes=eval_episodes, vec_env=vec_env,
                            embedding=str(embedding) if embedding else None, zoo=str(zoo) if zoo else None)
         if resume is None:
@@ -78,9 +79,15 @@ def train(
         def show_priors(names, sims):
             console.print("priors: " + ", ".join(f"[bold]{n}[/] (similarity {s:.3f})" for n, s in zip(names, sims)))
 
+        total = config.steps
+        if resume is not None and steps is None and (resume / "config.yaml").exists():
+            import yaml
+
+            total = yaml.safe_load((resume / "config.yaml").read_text()).get("steps", total)
         with Live(console=console, refresh_per_second=2, transient=False) as live:
-            display = LiveDisplay(steps, live)
-            run_dir, model, finished = run(config, out, resume=resume, callbacks=[display], on_priors=show_priors)
+            display = LiveDisplay(total, live)
+            run_dir, model, finished = run(config, out, resume=resume, callbacks=[display], on_priors=show_priors,
+                                           steps=steps if resume is not None else None)
             live.update(display.table(time.perf_counter()))
         if (run_dir / "evaluations.npz").exists():
             import numpy as np

@@ -190,7 +190,7 @@ def evaluation_callback(config: RunConfig, run_dir: Path) -> EvalCallback:
 
 def train(config: RunConfig, out: Path = Path("runs"), resume: Optional[Path] = None,
           callbacks: Optional[list[BaseCallback]] = None, on_priors: Optional[Callable[[list, list], None]] = None,
-          run_dir: Optional[Path] = None) -> tuple[Path, ACER, bool]:
+          run_dir: Optional[Path] = None, steps: Optional[int] = None) -> tuple[Path, ACER, bool]:
     """
     Train a new policy with the method (or from scratch), writing the run folder.
 
@@ -200,6 +200,7 @@ def train(config: RunConfig, out: Path = Path("runs"), resume: Optional[Path] = 
     :param callbacks: Extra SB3 callbacks (the CLI's live display)
     :param on_priors: Called with the chosen priors and their similarities
     :param run_dir: Write the run here instead of under ``out`` (experiments choose their own layout)
+    :param steps: With ``resume``, the run's new total of env steps (default: the saved one)
     :return: The run folder, the model, and whether training finished (False when interrupted)
     """
     if resume is not None:
@@ -208,6 +209,8 @@ def train(config: RunConfig, out: Path = Path("runs"), resume: Optional[Path] = 
             raise FileNotFoundError(f"{run_dir} is not a run folder with config.yaml and model.zip to resume")
         saved = yaml.safe_load((run_dir / "config.yaml").read_text())
         config = RunConfig(**{k: v for k, v in saved.items() if k in RunConfig.__dataclass_fields__})
+        if steps is not None:  # a finished run continues to a larger budget
+            config.steps = steps
     config.validate()
     run_dir = Path(resume or run_dir or config.run_dir(Path(out)))
     run_dir.mkdir(parents=True, exist_ok=True)

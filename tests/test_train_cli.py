@@ -106,6 +106,11 @@ def test_interrupt_saves_and_resume_continues_the_step_count(zoo, tmp_path):
     assert cfg["finished"] and cfg["num_timesteps"] >= 600
     assert ACER.load(run / "model.zip").num_timesteps == cfg["num_timesteps"]
     assert not (run / "replay_buffer.pkl").exists()
+    # A finished run continues to a larger budget on request.
+    result = runner.invoke(app, ["train", "--goal", "bathtub", "--resume", str(run), "--steps", "1000"])
+    assert result.exit_code == 0, result.output
+    cfg = yaml.safe_load((run / "config.yaml").read_text())
+    assert cfg["steps"] == 1000 and 1000 <= cfg["num_timesteps"] < 1100 and "/ 1,000" in result.output
 
 
 @pytest.mark.parametrize("extra,message", [
