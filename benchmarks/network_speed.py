@@ -13,6 +13,7 @@ import os
 import platform
 import statistics
 import time
+from collections.abc import Callable
 
 import torch as th
 from torch.func import functional_call, stack_module_state, vmap
@@ -20,16 +21,19 @@ from torch.func import functional_call, stack_module_state, vmap
 ROLLOUT, UPDATE = 4, 84
 
 
-def timed(fn, calls: int, repeats: int) -> float:
-    """Median over ``repeats`` of the mean milliseconds per call."""
-    fn()
-    out = []
+def timed(variants: list[tuple[Callable[[], object], int]], repeats: int) -> list[float]:
+    """Median over ``repeats`` of the mean milliseconds per call of each variant; the variants take turns
+    within each repeat, so that a slow spell of a shared machine does not fall on one of them only."""
+    times: list[list[float]] = [[] for _ in variants]
+    for fn, _ in variants:
+        fn()
     for _ in range(repeats):
-        start = time.perf_counter()
-        for _ in range(calls):
-            fn()
-        out.append((time.perf_counter() - start) / calls * 1e3)
-    return statistics.median(out)
+        for out, (fn, calls) in zip(times, variants):
+            start = time.perf_counter()
+            for _ in range(calls):
+                fn()
+            out.append((time.perf_counter() - start) / calls * 1e3)
+    return [statistics.median(t) for t in times]
 
 
 def main() -> None:
@@ -73,22 +77,22 @@ def main() -> None:
     rows = []
     for threads in args.threads:
         th.set_num_threads(threads)
-        cells = [
-            timed(lambda: forward(net, small), 100, args.repeats),
-            timed(lambda: forward(channels_last, small), 100, args.repeats),
-            timed(lambda: forward(net, large), 20, args.repeats),
-            timed(lambda: forward(channels_last, large), 20, args.repeats),
-            timed(lambda: forward_backward(net, large), 10, args.repeats),
-            timed(lambda: forward_backward(channels_last, large), 10, args.repeats),
-            timed(both_in_turn, 100, args.repeats),
-            timed(both_vmapped, 100, args.repeats),
-        ]
+        cells = timed([
+            (lambda: forward(net, small), 100),
+            (lambda: forward(channels_last, small), 100),
+            (lambda: forward(net, large), 20),
+            (lambda: forward(channels_last, large), 20),
+            (lambda: forward_backward(net, large), 10),
+            (lambda: forward_backward(channels_last, large), 10),
+            (both_in_turn, 100),
+            (both_vmapped, 100),
+        ], args.repeats)
         rows.append(f"| {threads} | " + " | ".join(f"{c:.2f}" for c in cells) + " |")
         print(rows[-1], flush=True)
     body = (
         f"Command: `python benchmarks/network_speed.py --threads {' '.join(map(str, args.threads))} --repeats "
         f"{args.repeats}`; {platform.machine()}, {os.cpu_count()} cores. Milliseconds per call (median of "
-        f"{args.repeats} repeats) of a prior's network (NatureCNN, 128 features, 60x80 RGB): forward on a rollout "
+        f"{args.repeats} repeats, the variants taking turns within each) of a prior's network (NatureCNN, 128 features, 60x80 RGB): forward on a rollout "
         f"batch of {ROLLOUT} frames, forward and forward + backward on an update batch of {UPDATE} frames, in NCHW "
         "and channels-last; and both priors of a rollout step in turn against one vmapped call.\n\n"
         "| torch threads | fwd 4 NCHW | fwd 4 channels-last | fwd 84 NCHW | fwd 84 channels-last | "
