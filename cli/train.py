@@ -70,7 +70,7 @@ def train(
 
         config = RunConfig(goal=goal, env_id=env, mode=mode,
                            priors="auto" if priors == "auto" else [p.strip() for p in priors.split(",") if p.strip()],
-                           alpha=alpha, beta=beta, steps=steps or 100_000, seed=seed, n_envs=n_envs,
+                           alpha=alpha, beta=beta, steps=100_000 if steps is None else steps, seed=seed, n_envs=n_envs,
                            eval_every=eval_every, eval_episodes=eval_episodes, vec_env=vec_env,
                            embedding=str(embedding) if embedding else None, zoo=str(zoo) if zoo else None)
         if resume is None:
