@@ -46,16 +46,13 @@ def evaluations(run_dir: Path, seed: int) -> tuple[np.ndarray, np.ndarray]:
     return steps[keep], success[keep]
 
 
-def evaluate_alone(run_dir: Path, episodes: int, deterministic: bool) -> float:
+def success_alone(run_dir: Path, episodes: int, deterministic: bool) -> float:
     from sb3_disagree.acer import ACER
-    from sb3_disagree.prior_training import evaluate, make_env
+    from sb3_disagree.training import evaluate_alone
 
     config = yaml.safe_load((run_dir / "config.yaml").read_text())
-    env = make_env(config["env_id"], config["goal"], config.get("env_kwargs") or {}, n_envs=4, seed=50_000)
-    model = ACER.load(run_dir / "model.zip", env=env)
-    result = evaluate(model, env, episodes, deterministic=deterministic)
-    env.close()
-    return result.success_rate
+    model = ACER.load(run_dir / "model.zip", device="cpu")
+    return evaluate_alone(model, config, episodes, deterministic, seed=50_000).success_rate
 
 
 def main() -> None:
@@ -69,8 +66,8 @@ def main() -> None:
         config = yaml.safe_load((run_dir / "config.yaml").read_text())
         seed, total = config["seed"], config["num_timesteps"]
         steps, success = evaluations(run_dir, seed)
-        sampled = evaluate_alone(run_dir, args.episodes, deterministic=False)
-        greedy = evaluate_alone(run_dir, args.episodes, deterministic=True)
+        sampled = success_alone(run_dir, args.episodes, deterministic=False)
+        greedy = success_alone(run_dir, args.episodes, deterministic=True)
         original = json.loads((ORIGINAL / f"seed-{seed}" / "result.json").read_text())["final_alone"]["success_rate"]
         ax.plot(steps, success, marker="o", label=f"seed {seed}")
         reached = steps[success >= 0.95]

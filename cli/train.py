@@ -16,11 +16,13 @@ from sb3_disagree.cli.common import DEFAULT_ENV, clean_errors, console
 class LiveDisplay(BaseCallback):
     """Steps, env steps/s, recent success rate, prior usage and disagreement, refreshed every second."""
 
-    def __init__(self, total: int, live: Live) -> None:
+    def __init__(self, live: Live) -> None:
         super().__init__()
-        self.total, self.live, self.last_draw, self.t0, self.n0 = total, live, 0.0, time.perf_counter(), 0
+        self.total, self.live, self.last_draw, self.t0, self.n0 = 0, live, 0.0, time.perf_counter(), 0
 
     def _on_training_start(self) -> None:
+        # learn() has made its budget absolute by now, also when a run resumes (as SB3's progress bar reads it).
+        self.total = int(self.locals["total_timesteps"])
         self.t0, self.n0 = time.perf_counter(), self.model.num_timesteps
 
     def _on_step(self) -> bool:
@@ -79,13 +81,8 @@ def train(
         def show_priors(names, sims):
             console.print("priors: " + ", ".join(f"[bold]{n}[/] (similarity {s:.3f})" for n, s in zip(names, sims)))
 
-        total = config.steps
-        if resume is not None and steps is None and (resume / "config.yaml").exists():
-            import yaml
-
-            total = yaml.safe_load((resume / "config.yaml").read_text()).get("steps", total)
         with Live(console=console, refresh_per_second=2, transient=False) as live:
-            display = LiveDisplay(total, live)
+            display = LiveDisplay(live)
             run_dir, model, finished = run(config, out, resume=resume, callbacks=[display], on_priors=show_priors,
                                            steps=steps if resume is not None else None)
             live.update(display.table(time.perf_counter()))
@@ -116,7 +113,7 @@ def eval_run(
         import yaml
 
         from sb3_disagree.acer import ACER
-        from sb3_disagree.prior_training import evaluate, make_env
+        from sb3_disagree.training import evaluate_alone
 
         path = Path(run_or_model)
         run_dir = path if path.is_dir() else path.parent
@@ -128,8 +125,7 @@ def eval_run(
             raise FileNotFoundError(f"{cfg_path} is missing: it names the environment and goal to evaluate in")
         cfg = yaml.safe_load(cfg_path.read_text())
         model = ACER.load(model_path, device="cpu")
-        venv = make_env(cfg["env_id"], cfg["goal"], cfg.get("env_kwargs"), n_envs=4, seed=seed)
-        result = evaluate(model, venv, episodes, deterministic)
+        result = evaluate_alone(model, cfg, episodes, deterministic, seed)
         console.print(f"{cfg['goal']}: success {result.success_rate:.2f}, mean length {result.mean_length:.1f}, "
                       f"mean return {result.mean_return:.2f} over {episodes} episodes "
                       f"({'greedy' if deterministic else 'sampled'} actions, no priors)")

@@ -252,3 +252,23 @@ def train(config: RunConfig, out: Path = Path("runs"), resume: Optional[Path] = 
     env.close()
     return run_dir, model, finished
 
+
+
+def evaluate_alone(model: ACER, config: dict[str, Any], episodes: int, deterministic: bool, seed: int):
+    """
+    The new policy alone (no priors) in its run's task, on 4 envs seeded from ``seed``.
+
+    :param model: The trained model
+    :param config: The run's configuration (a saved ``config.yaml`` or ``asdict(RunConfig)``): env and goal
+    :param episodes: Number of episodes
+    :param deterministic: Greedy actions if True, sampled otherwise
+    :param seed: Seed of the first env
+    :return: The :class:`~sb3_disagree.prior_training.Evaluation`
+    """
+    from sb3_disagree.prior_training import evaluate, make_env
+
+    env = make_env(config["env_id"], config["goal"], config.get("env_kwargs") or {}, n_envs=4, seed=seed)
+    try:
+        return evaluate(model, env, episodes, deterministic=deterministic)
+    finally:
+        env.close()

@@ -31,21 +31,18 @@ def train_and_evaluate(run: Run, folder: Path) -> dict[str, Any]:
     import torch as th
 
     th.set_num_threads(1)
-    from sb3_disagree.prior_training import evaluate, make_env
-    from sb3_disagree.training import train
+    from sb3_disagree.training import evaluate_alone, train
 
     start = time.perf_counter()
     run_dir, model, finished = train(run.config, run_dir=folder)
     if not finished:
         raise KeyboardInterrupt
     seconds = time.perf_counter() - start
-    venv = make_env(run.config.env_id, run.config.goal, run.config.env_kwargs, n_envs=4, seed=run.seed + 20_000)
-    alone = evaluate(model, venv, run.final_episodes, deterministic=False)
-    venv.close()
+    alone = evaluate_alone(model, asdict(run.config), run.final_episodes, deterministic=False, seed=run.seed + 20_000)
     result = {"cell": run.cell, "seed": run.seed, "steps": int(model.num_timesteps), "seconds": round(seconds, 1),
               "fps": round(model.num_timesteps / max(seconds, 1e-9), 1), "final_alone": alone.as_dict(),
               "config": asdict(run.config)}
-    write_atomic(folder / RESULT, (json.dumps(result, indent=2) + "\n").encode())
+    write_atomic(folder / RESULT, json.dumps(result, indent=2) + "\n")
     return result
 
 
