@@ -14,7 +14,7 @@ from pathlib import Path
 import yaml
 from docs_section import DOCS, write_section
 
-from sb3_disagree.experiments.report import plot, summarize, table_markdown
+from sb3_disagree.experiments.report import plot, seeds_markdown, summarize, table_markdown
 from sb3_disagree.experiments.spec import load_experiment
 
 ROOT = Path(__file__).resolve().parent / "results" / "experiments"
@@ -40,7 +40,9 @@ def main(name: str) -> None:
             "followed), mean over seeds with a 95% t-interval; dashed: the new policy alone (no priors, sampled "
             "actions, 20 episodes every 20k steps). Table: steps to 50%/90% and success at the budgets read from "
             "the mean training curve; AUC is the mean of that curve over the run; the new policy alone (final) is "
-            f"evaluated over {experiment.final_episodes} episodes after training, per seed in brackets.\n")
+            f"evaluated over {experiment.final_episodes} episodes after training, per seed in brackets.\n\n"
+            f"Per seed, read from each seed's own training curve (the same 50-episode window):\n\n"
+            f"{seeds_markdown(summaries)}\n")
     write_section(experiment.name, f"{experiment.name}: {experiment.goal}", body, page="results.md")
     print(body)
 

@@ -31,6 +31,16 @@ PARTS = [
 ]
 
 
+def own_time_rows(stats: pstats.Stats, n: int) -> list[str]:
+    """The ``n`` functions with the largest own time, as table rows."""
+    top = sorted(stats.stats.items(), key=lambda kv: kv[1][2], reverse=True)[:n]
+    rows = []
+    for (file, line, fn), (_, _, tottime, _, _) in top:
+        where = fn if file == "~" else f"{Path(file).parent.name}/{Path(file).name}:{line} {fn}"
+        rows.append(f"| `{where}` | {tottime:.1f} | {100 * tottime / stats.total_tt:.0f}% |")
+    return rows
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--steps", type=int, default=4_000)
@@ -68,7 +78,9 @@ def main() -> None:
             f"{args.steps} env steps after a 2.4k-step warm-up, under cProfile, {args.threads} torch thread(s); "
             f"{platform.machine()}, {os.cpu_count()} cores. {args.steps} steps in {wall:.1f} s "
             f"({args.steps / wall:.0f} steps/s under the profiler, model load and env creation included).\n\n"
-            "| part | cumulative s | share |\n|---|---|---|\n" + "\n".join(rows) + "\n")
+            "| part | cumulative s | share |\n|---|---|---|\n" + "\n".join(rows) + "\n\n"
+            "The functions with the most time spent in themselves (not in what they call):\n\n"
+            "| function | own s | share |\n|---|---|---|\n" + "\n".join(own_time_rows(stats, 6)) + "\n")
     if args.write:
         write_section("train-profile", "Where `dopt train`'s time goes", body)
     print(body)

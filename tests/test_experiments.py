@@ -8,7 +8,7 @@ import yaml
 from typer.testing import CliRunner
 
 from sb3_disagree.cli.app import app
-from sb3_disagree.experiments.report import summarize, table_markdown
+from sb3_disagree.experiments.report import seeds_markdown, summarize, table_markdown
 from sb3_disagree.experiments.runner import run_experiment
 from sb3_disagree.experiments.spec import SHIPPED, load_experiment
 
@@ -74,6 +74,11 @@ def test_summary_numbers_match_the_runs(zoo, tmp_path):
         assert s.cell != "scratch" or np.isnan(s.usage).all()
         assert list(s.alone_steps) == [160, 320] and ((0 <= s.alone_mean) & (s.alone_mean <= 1)).all()
     assert table_markdown(experiment, summaries).count("\n") == 1 + len(summaries)
+    # With one seed, that seed's curve is the mean curve.
+    for s in summaries:
+        np.testing.assert_array_equal(s.seed_final, [s.mean[-1]])  # nan where too few episodes ended
+        assert s.seed_steps_to_90 == [s.steps_to_90]
+    assert seeds_markdown(summaries).count("\n") == 1 + len(summaries)
 
 
 def test_ray_backend_runs_two_tiny_runs(zoo, tmp_path):

@@ -37,6 +37,8 @@ class CellSummary:
     records: list[dict] = field(default_factory=list)
     alone_steps: np.ndarray = field(default_factory=lambda: np.zeros(0))
     alone_mean: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    seed_final: list[float] = field(default_factory=list)  # each seed's training success at the last grid step
+    seed_steps_to_90: list[Optional[float]] = field(default_factory=list)
 
 
 def alone_curve(folders: list[Path]) -> tuple[np.ndarray, np.ndarray]:
@@ -76,7 +78,8 @@ def summarize(experiment: Experiment, root: Path) -> tuple[np.ndarray, list[Cell
             steps_to_50=steps_to(mean, grid, 0.5), steps_to_90=steps_to(mean, grid, 0.9), at_budgets=at,
             auc=float(np.mean(np.nan_to_num(mean, nan=0.0))), final_alone=float(np.mean(alone)),
             final_alone_seeds=alone, fps=float(np.mean([r["fps"] for r in records])), records=records,
-            alone_steps=alone_steps, alone_mean=alone_mean))
+            alone_steps=alone_steps, alone_mean=alone_mean, seed_final=[float(c[-1]) for c in curves],
+            seed_steps_to_90=[steps_to(c, grid, 0.9) for c in curves]))
     return grid, summaries
 
 
@@ -94,6 +97,15 @@ def table_markdown(experiment: Experiment, summaries: list[CellSummary]) -> str:
         lines.append(f"| {s.cell} | {len(s.seeds)} | {_steps(s.steps_to_50)} | {_steps(s.steps_to_90)} |{at} "
                      f"{s.auc:.2f} | {s.final_alone:.2f} ({', '.join(f'{a:.2f}' for a in s.final_alone_seeds)}) | "
                      f"{s.fps:.0f} |")
+    return "\n".join(lines)
+
+
+def seeds_markdown(summaries: list[CellSummary]) -> str:
+    """Per seed: training success at the end of the run, and the step where it first reached 90%."""
+    lines = ["| cell | seeds | training success at the end | steps to 90% |", "|---|---|---|---|"]
+    for s in summaries:
+        lines.append(f"| {s.cell} | {', '.join(map(str, s.seeds))} | {', '.join(f'{v:.2f}' for v in s.seed_final)} | "
+                     f"{', '.join(_steps(v) for v in s.seed_steps_to_90)} |")
     return "\n".join(lines)
 
 
