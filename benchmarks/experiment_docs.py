@@ -30,11 +30,17 @@ def main(name: str) -> None:
     plot(experiment, grid, summaries, figure, root)
     seeds = sorted({s for c in summaries for s in c.seeds})
     acer = summaries[0].records[0]["config"]["acer_kwargs"]
+    continued = ""
+    if experiment.continues:
+        begun = sorted({r.get("from_steps", 0) for c in summaries for r in c.records})
+        continued = (f"Each run continues `{experiment.continues}`'s finished run of the same cell and seed (`continues:` "
+                     f"in the YAML): its first {', '.join(f'{b:,}' for b in begun)} env steps are that run's, and the "
+                     "replay buffer starts empty where it continues; env steps/s is the continuation's. ")
     body = (f"Commands: `dopt experiment run {name} --jobs 2 --seeds {','.join(map(str, seeds))}` then "
             f"`python benchmarks/experiment_docs.py {name}` (grid: `benchmarks/experiments/{name}.yaml`). "
             f"Seeds {', '.join(map(str, seeds))}; {experiment.steps:,} env steps per run; {platform.machine()}, "
             f"{os.cpu_count()} cores, two runs at a time, one torch thread each. ACER: "
-            f"{yaml.safe_dump(acer, default_flow_style=True, width=200).strip()}.\n\n"
+            f"{yaml.safe_dump(acer, default_flow_style=True, width=200).strip()}. {continued}\n\n"
             f"![{experiment.name}](images/{figure.name})\n\n{table_markdown(experiment, summaries)}\n\n"
             "Solid lines: training success (the last 50 episodes over all envs, priors included where they were "
             "followed), mean over seeds with a 95% t-interval; dashed: the new policy alone (no priors, sampled "

@@ -4,7 +4,8 @@ One training run of the method: choose priors, build the behaviour, train ACER, 
 A run folder (``runs/<env>/<goal>/<mode>-<seed>/``) holds ``config.yaml``, ``model.zip``,
 ``progress.csv``, TensorBoard events, ``monitor/`` files and ``trajectories.jsonl`` (the recorded
 episodes with their per-step tags). An interrupted run saves the model and the replay buffer; a
-resumed run continues the step count.
+resumed run continues the step count and appends to the run's history (monitor files, ``progress.csv``,
+``evaluations.npz``), so its curves read as one run.
 """
 
 import json
@@ -14,10 +15,11 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any, Optional
 
+import numpy as np
 import yaml
 from stable_baselines3.common.callbacks import BaseCallback, CallbackList, EvalCallback
 from stable_baselines3.common.env_util import make_vec_env
-from stable_baselines3.common.logger import configure
+from stable_baselines3.common.logger import CSVOutputFormat, Logger, make_output_format
 
 from sb3_disagree.acer import ACER
 from sb3_disagree.options import MODES, PriorSet, make_options
@@ -152,9 +154,9 @@ class RecordTrajectories(BaseCallback):
 
 
 def build_env(config: RunConfig, run_dir: Optional[Path], n_envs: Optional[int] = None, seed: Optional[int] = None,
-              vec_env: Optional[str] = None):
-    """The VecEnv of a run (Monitor files under ``run_dir/monitor`` when given); ``n_envs``, ``seed`` and
-    ``vec_env`` override the config's."""
+              vec_env: Optional[str] = None, append: bool = False):
+    """The VecEnv of a run (Monitor files under ``run_dir/monitor`` when given, appended to with ``append``);
+    ``n_envs``, ``seed`` and ``vec_env`` override the config's."""
     import functools
 
     from gymnasium.envs.registration import registry
@@ -170,13 +172,33 @@ def build_env(config: RunConfig, run_dir: Optional[Path], n_envs: Optional[int] 
                         seed=config.seed if seed is None else seed,
                         monitor_dir=str(run_dir / "monitor") if run_dir else None,
                         env_kwargs=dict(goal=config.goal, **config.env_kwargs),
-                        monitor_kwargs=dict(info_keywords=("is_success",)),
+                        monitor_kwargs=dict(info_keywords=("is_success",), override_existing=not append),
                         vec_env_cls=SubprocVecEnv if subproc else DummyVecEnv,
                         vec_env_kwargs=dict(start_method="forkserver") if subproc else None)
 
 
-def evaluation_callback(config: RunConfig, run_dir: Path) -> EvalCallback:
-    """The new policy alone on its own envs (other seeds), sampled actions, every ``eval_every`` steps."""
+class AppendingCSVOutputFormat(CSVOutputFormat):
+    """``progress.csv`` of a resumed run: the earlier rows stay, new rows follow (SB3's format truncates)."""
+
+    def __init__(self, filename: str):
+        self.file = open(filename, "r+")
+        header = self.file.readline().rstrip("\n")
+        self.keys = header.split(",") if header else []
+        self.file.seek(0, os.SEEK_END)
+        self.separator = ","
+        self.quotechar = '"'
+
+
+def run_logger(run_dir: Path, append: bool) -> Logger:
+    """CSV and TensorBoard logs in the run folder; a resumed run appends to its ``progress.csv``."""
+    progress = run_dir / "progress.csv"
+    csv = AppendingCSVOutputFormat(str(progress)) if append and progress.exists() else CSVOutputFormat(str(progress))
+    return Logger(str(run_dir), [csv, make_output_format("tensorboard", str(run_dir))])
+
+
+def evaluation_callback(config: RunConfig, run_dir: Path, append: bool = False) -> EvalCallback:
+    """The new policy alone on its own envs (other seeds), sampled actions, every ``eval_every`` steps; with
+    ``append``, the evaluations already in ``run_dir/evaluations.npz`` are kept ahead of the new ones."""
     from stable_baselines3.common.preprocessing import is_image_space, is_image_space_channels_first
     from stable_baselines3.common.vec_env import VecTransposeImage
 
@@ -184,8 +206,17 @@ def evaluation_callback(config: RunConfig, run_dir: Path) -> EvalCallback:
     space = eval_env.observation_space
     if is_image_space(space) and not is_image_space_channels_first(space):
         eval_env = VecTransposeImage(eval_env)  # as ACER wraps the training env
-    return EvalCallback(eval_env, n_eval_episodes=config.eval_episodes, eval_freq=max(config.eval_every // config.n_envs, 1),
-                        log_path=str(run_dir), deterministic=False, verbose=0)
+    callback = EvalCallback(eval_env, n_eval_episodes=config.eval_episodes,
+                            eval_freq=max(config.eval_every // config.n_envs, 1), log_path=str(run_dir),
+                            deterministic=False, verbose=0)
+    earlier = run_dir / "evaluations.npz"
+    if append and earlier.exists():
+        with np.load(earlier) as data:  # EvalCallback rewrites the file from these lists at each evaluation
+            callback.evaluations_timesteps = data["timesteps"].tolist()
+            callback.evaluations_results = list(data["results"])
+            callback.evaluations_length = list(data["ep_lengths"])
+            callback.evaluations_successes = list(data["successes"]) if "successes" in data else []
+    return callback
 
 
 def train(config: RunConfig, out: Path = Path("runs"), resume: Optional[Path] = None,
@@ -214,7 +245,7 @@ def train(config: RunConfig, out: Path = Path("runs"), resume: Optional[Path] = 
     config.validate()
     run_dir = Path(resume or run_dir or config.run_dir(Path(out)))
     run_dir.mkdir(parents=True, exist_ok=True)
-    env = build_env(config, run_dir)
+    env = build_env(config, run_dir, append=resume is not None)
     behaviour, prior_names, sims = None, [], []
     if config.mode != "scratch":
         prior_names, sims, priors = choose_priors(config, env)
@@ -232,10 +263,10 @@ def train(config: RunConfig, out: Path = Path("runs"), resume: Optional[Path] = 
         model = ACER(policy, env, seed=config.seed, behaviour=behaviour, **config.acer_kwargs)
         remaining = config.steps
         (run_dir / "config.yaml").write_text(yaml.safe_dump(saved_config, sort_keys=False))
-    model.set_logger(configure(str(run_dir), ["csv", "tensorboard"]))
+    model.set_logger(run_logger(run_dir, append=resume is not None))
     own = [RecordTrajectories(run_dir / "trajectories.jsonl")]
     if config.eval_every:
-        own.append(evaluation_callback(config, run_dir))
+        own.append(evaluation_callback(config, run_dir, append=resume is not None))
     finished = True
     try:
         model.learn(remaining, callback=CallbackList([*own, *(callbacks or [])]), log_interval=10,

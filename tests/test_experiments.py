@@ -99,6 +99,41 @@ def test_ray_backend_runs_two_tiny_runs(zoo, tmp_path):
         assert list((folder / "monitor").glob("*.monitor.csv"))
 
 
+def test_continuing_an_experiment_extends_its_runs(zoo, tmp_path):
+    """``continues``: each run starts from the other experiment's finished run and keeps its history."""
+    import pandas as pd
+
+    short = _grid(tmp_path, zoo, seeds=(0,))
+    results = tmp_path / "results"
+    assert runner.invoke(app, ["experiment", "run", str(short), "--jobs", "1", "--cells", "scratch",
+                               "--out", str(results / "tiny")]).exit_code == 0
+    spec = yaml.safe_load(short.read_text())
+    spec.update(name="tiny-long", continues="tiny", steps=640, budgets=[320, 640])
+    long = tmp_path / "tiny-long.yaml"
+    long.write_text(yaml.safe_dump(spec))
+    # Cells without a finished run to continue are refused before anything runs.
+    result = runner.invoke(app, ["experiment", "run", str(long), "--jobs", "1", "--out", str(results / "tiny-long")])
+    assert result.exit_code == 2 and "run first: dopt experiment run tiny" in result.output
+    assert not (results / "tiny-long").exists()
+    result = runner.invoke(app, ["experiment", "run", str(long), "--jobs", "1", "--cells", "scratch",
+                                 "--out", str(results / "tiny-long")])
+    assert result.exit_code == 0, result.output
+    before, after = results / "tiny" / "scratch" / "seed-0", results / "tiny-long" / "scratch" / "seed-0"
+    record = json.loads((after / "result.json").read_text())
+    assert record["from_steps"] == 320 and record["steps"] == 640
+    assert list(np.load(after / "evaluations.npz")["timesteps"]) == [160, 320, 480, 640]
+    steps = pd.read_csv(after / "progress.csv")["time/total_timesteps"].dropna()
+    assert steps.iloc[0] <= 320 < steps.iloc[-1]
+    # The continued run is left as it was.
+    assert json.loads((before / "result.json").read_text())["steps"] == 320
+    # A continuation with other settings than the run it continues is refused.
+    spec.update(name="tiny-other", cells={"scratch": {"mode": "scratch", "n_envs": 4}})
+    other = tmp_path / "tiny-other.yaml"
+    other.write_text(yaml.safe_dump(spec))
+    result = runner.invoke(app, ["experiment", "run", str(other), "--jobs", "1", "--out", str(results / "tiny-other")])
+    assert result.exit_code == 2 and "trained with other n_envs" in result.output
+
+
 @pytest.mark.parametrize("bad,message", [
     ({"cells": {}}, "at least one cell"),
     ({"cells": {"a": {"mode": "nonsense"}}}, "--mode"),

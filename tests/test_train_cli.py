@@ -113,6 +113,31 @@ def test_interrupt_saves_and_resume_continues_the_step_count(zoo, tmp_path):
     assert cfg["steps"] == 1000 and 1000 <= cfg["num_timesteps"] < 1100 and "/ 1,000" in result.output
 
 
+def test_resumed_run_appends_to_its_history(zoo, tmp_path):
+    """Monitor files, progress.csv and evaluations.npz of a continued run hold both legs, in order."""
+    import numpy as np
+    import pandas as pd
+
+    def episodes(run):
+        return [pd.read_csv(f, skiprows=1) for f in sorted((run / "monitor").glob("*.monitor.csv"))]
+
+    config = RunConfig(goal="bathtub", env_id=STATE_ID, steps=1000, n_envs=2, zoo=str(zoo), eval_every=500,
+                       eval_episodes=1)
+    run, _, _ = train(config, tmp_path)  # episodes last at most 500 steps: each env ends one at least
+    first = episodes(run)
+    assert all(len(m) for m in first)
+    run, model, finished = train(config, resume=run, steps=2000)
+    assert finished and model.num_timesteps == 2000
+    both = episodes(run)
+    for before, after in zip(first, both):
+        assert len(after) > len(before) and after.iloc[:len(before)].equals(before)
+    assert sum(int(m["l"].sum()) for m in first) < sum(int(m["l"].sum()) for m in both) <= 2000
+    steps = pd.read_csv(run / "progress.csv")["time/total_timesteps"].dropna().to_numpy()
+    assert steps[0] <= 1000 < steps[-1] and np.all(np.diff(steps) > 0)
+    evals = np.load(run / "evaluations.npz")
+    assert list(evals["timesteps"]) == [500, 1000, 1500, 2000] and evals["successes"].shape == (4, 1)
+
+
 @pytest.mark.parametrize("extra,message", [
     (["--beta", "-0.5"], "--beta must be >= 0"),
     (["--mode", "greedy"], "--mode must be one of"),

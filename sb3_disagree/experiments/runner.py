@@ -8,6 +8,7 @@ several runs share a machine.
 
 import json
 import os
+import shutil
 import tempfile
 import time
 from collections.abc import Callable
@@ -16,16 +17,37 @@ from dataclasses import asdict
 from pathlib import Path
 from typing import Any, Optional
 
+import yaml
+
 from sb3_disagree.experiments.spec import RESULT, Experiment, Run
 from sb3_disagree.files import write_atomic
 
 BACKENDS = ("local", "ray")
 
 
-def train_and_evaluate(run: Run, folder: Path) -> dict[str, Any]:
+# What a continuation must share with the run it continues (everything but the budget).
+SAME = ("goal", "env_id", "mode", "alpha", "beta", "seed", "n_envs", "acer_kwargs")
+
+
+def _start_from(source: Path, folder: Path, run: Run) -> int:
+    """Copy a finished run into ``folder`` (afresh, so a stopped continuation starts again) to continue it;
+    :return: its env steps."""
+    saved = yaml.safe_load((source / "config.yaml").read_text())
+    wanted = asdict(run.config)
+    differ = [k for k in SAME if saved.get(k) != wanted[k]]
+    if differ:
+        raise ValueError(f"{source} was trained with other {', '.join(differ)} than {run.cell} seed {run.seed}")
+    if folder.exists():
+        shutil.rmtree(folder)
+    shutil.copytree(source, folder, ignore=shutil.ignore_patterns(RESULT))
+    return int(saved["num_timesteps"])
+
+
+def train_and_evaluate(run: Run, folder: Path, source: Optional[Path] = None) -> dict[str, Any]:
     """
     Train one run into ``folder``, evaluate the new policy alone, and write ``result.json``.
 
+    :param source: A finished run to continue to ``run.config.steps`` instead of starting afresh
     :return: The result record
     """
     import torch as th
@@ -33,24 +55,36 @@ def train_and_evaluate(run: Run, folder: Path) -> dict[str, Any]:
     th.set_num_threads(1)
     from sb3_disagree.training import evaluate_alone, train
 
+    begun = _start_from(source, folder, run) if source is not None else 0
     start = time.perf_counter()
-    run_dir, model, finished = train(run.config, run_dir=folder)
+    if source is not None:
+        run_dir, model, finished = train(run.config, resume=folder, steps=run.config.steps)
+    else:
+        run_dir, model, finished = train(run.config, run_dir=folder)
     if not finished:
         raise KeyboardInterrupt
     seconds = time.perf_counter() - start
     alone = evaluate_alone(model, asdict(run.config), run.final_episodes, deterministic=False, seed=run.seed + 20_000)
     result = {"cell": run.cell, "seed": run.seed, "steps": int(model.num_timesteps), "seconds": round(seconds, 1),
-              "fps": round(model.num_timesteps / max(seconds, 1e-9), 1), "final_alone": alone.as_dict(),
-              "config": asdict(run.config)}
+              "fps": round((model.num_timesteps - begun) / max(seconds, 1e-9), 1), "final_alone": alone.as_dict(),
+              "config": asdict(run.config), **({"continued_from": str(source), "from_steps": begun} if source else {})}
     write_atomic(folder / RESULT, json.dumps(result, indent=2) + "\n")
     return result
 
 
-def _ray_task(run: Run) -> tuple[dict[str, Any], dict[str, bytes]]:
-    """A run on a Ray worker, in a scratch folder; its files travel back to the driver."""
+def _files(folder: Path) -> dict[str, bytes]:
+    return {str(p.relative_to(folder)): p.read_bytes() for p in folder.rglob("*") if p.is_file()}
+
+
+def _ray_task(run: Run, start: Optional[dict[str, bytes]] = None) -> tuple[dict[str, Any], dict[str, bytes]]:
+    """A run on a Ray worker, in a scratch folder; the run it continues travels there, its files travel back."""
     with tempfile.TemporaryDirectory() as tmp:
-        result = train_and_evaluate(run, Path(tmp))
-        files = {str(p.relative_to(tmp)): p.read_bytes() for p in Path(tmp).rglob("*") if p.is_file()}
+        source = None
+        if start is not None:
+            source = Path(tmp) / "source"
+            _unpack(source, start)
+        result = train_and_evaluate(run, Path(tmp) / "run", source)
+        files = _files(Path(tmp) / "run")
     return result, files
 
 
@@ -81,6 +115,7 @@ def run_experiment(
     if backend not in BACKENDS:
         raise ValueError(f"--backend must be one of {', '.join(BACKENDS)}, got {backend!r}")
     todo = [r for r in experiment.runs() if not r.finished(root)]
+    sources = {id(r): r.source(root, experiment.continues) for r in todo}  # all there before anything starts
     results: list[dict[str, Any]] = []
 
     def done(result: dict[str, Any]) -> None:
@@ -95,7 +130,7 @@ def run_experiment(
 
         ray.init(address=address, include_dashboard=False, log_to_driver=False, ignore_reinit_error=True)
         task = ray.remote(num_cpus=1)(_ray_task)
-        pending = {task.remote(r): r for r in todo}
+        pending = {task.remote(r, _files(sources[id(r)]) if sources[id(r)] else None): r for r in todo}
         while pending:
             ready, _ = ray.wait(list(pending), num_returns=1)
             run = pending.pop(ready[0])
@@ -104,10 +139,10 @@ def run_experiment(
             done(result)
     elif (jobs or os.cpu_count() or 1) == 1:
         for r in todo:
-            done(train_and_evaluate(r, r.folder(root)))
+            done(train_and_evaluate(r, r.folder(root), sources[id(r)]))
     else:
         with ProcessPoolExecutor(jobs or os.cpu_count()) as pool:
-            futures = [pool.submit(train_and_evaluate, r, r.folder(root)) for r in todo]
+            futures = [pool.submit(train_and_evaluate, r, r.folder(root), sources[id(r)]) for r in todo]
             for future in as_completed(futures):
                 done(future.result())
     return results

@@ -18,6 +18,11 @@ An experiment: a named grid of runs described by a small YAML file.
 
 Each cell's mapping overrides RunConfig fields (``mode``, ``alpha``, ``beta``, ...) and may hold its own
 ``acer`` mapping. Every (cell, seed) is one run, written under ``<results>/<cell>/seed-<seed>/``.
+
+``continues: OTHER`` makes each run a continuation of OTHER's finished run of the same cell and seed (read
+from the results folder beside this one) to this experiment's larger ``steps``: longer budgets without
+repeating the first steps. The replay buffer is not kept at the end of a finished run, so a continuation
+starts with an empty one.
 """
 
 from dataclasses import dataclass, field
@@ -48,6 +53,16 @@ class Run:
     def finished(self, root: Path) -> bool:
         return (self.folder(root) / RESULT).exists()
 
+    def source(self, root: Path, continues: Optional[str]) -> Optional[Path]:
+        """The finished run this one continues (beside ``root``), or None; an error if it is not there."""
+        if continues is None:
+            return None
+        source = self.folder(root.parent / continues)
+        if not (source / RESULT).exists() or not (source / "model.zip").exists():
+            raise FileNotFoundError(f"{self.cell} seed {self.seed} continues {source}, which is not a finished run "
+                                    f"with its model; run first: dopt experiment run {continues}")
+        return source
+
 
 @dataclass
 class Experiment:
@@ -66,6 +81,7 @@ class Experiment:
     :param run: RunConfig fields shared by every cell
     :param acer: ACER hyperparameters shared by every cell, on top of the defaults
     :param trajectories: Whether the report draws a recorded episode per cell (paper Figure 5)
+    :param continues: The experiment whose finished runs these runs continue (same cells and seeds)
     """
 
     name: str
@@ -80,6 +96,7 @@ class Experiment:
     run: dict[str, Any] = field(default_factory=dict)
     acer: dict[str, Any] = field(default_factory=dict)
     trajectories: bool = False
+    continues: Optional[str] = None
 
     def restrict(self, seeds: Optional[list[int]] = None, cells: Optional[list[str]] = None) -> None:
         """Keep only some of the seeds and cells (each must be part of the experiment)."""
