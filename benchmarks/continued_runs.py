@@ -2,8 +2,8 @@
 How far the new policy alone gets when finished fig3-bathtub runs are continued past 100k env steps.
 
 A finished run of `dopt experiment run fig3-bathtub` is copied and continued with
-`dopt train --goal bathtub --resume COPY --steps N` (once or in several legs; a leg's periodic evaluations
-are kept as ``evaluations-<steps>.npz`` before the next leg overwrites ``evaluations.npz``). This script
+`dopt train --goal bathtub --resume COPY --steps N` (once or in several legs; runs continued before resumed
+runs appended to ``evaluations.npz`` kept each leg's as ``evaluations-<steps>.npz``). This script
 reads the new policy alone's periodic evaluations of every leg, the original run's up to 100k, evaluates
 each continued model alone over ``--episodes`` episodes (sampled and greedy actions), keeps the small
 files under benchmarks/results/continued/, and writes a figure and a table into docs/results.md.
