@@ -14,7 +14,7 @@ from pathlib import Path
 import yaml
 from docs_section import DOCS, write_section
 
-from sb3_disagree.experiments.report import plot, seeds_markdown, summarize, table_markdown
+from sb3_disagree.experiments.report import plot, ratio_markdown, seeds_markdown, summarize, table_markdown
 from sb3_disagree.experiments.spec import load_experiment
 
 ROOT = Path(__file__).resolve().parent / "results" / "experiments"
@@ -49,6 +49,11 @@ def main(name: str) -> None:
             f"evaluated over {experiment.final_episodes} episodes after training, per seed in brackets.\n\n"
             f"Per seed, read from each seed's own training curve (the same 50-episode window):\n\n"
             f"{seeds_markdown(summaries)}\n")
+    ratio = ratio_markdown(grid, summaries)
+    if ratio is not None:
+        body += ("\nSteps to 90% training success with disagreement options over those from scratch, per seed and "
+                 f"from the mean curves (a curve that never gets there counts as the run's {experiment.steps:,} "
+                 f"steps, which bounds the ratio):\n\n{ratio}\n")
     write_section(experiment.name, f"{experiment.name}: {experiment.goal}", body, page="results.md")
     print(body)
 

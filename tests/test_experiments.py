@@ -8,7 +8,7 @@ import yaml
 from typer.testing import CliRunner
 
 from sb3_disagree.cli.app import app
-from sb3_disagree.experiments.report import seeds_markdown, summarize, table_markdown
+from sb3_disagree.experiments.report import CellSummary, ratio_markdown, seeds_markdown, summarize, table_markdown
 from sb3_disagree.experiments.runner import run_experiment
 from sb3_disagree.experiments.spec import SHIPPED, load_experiment
 
@@ -79,6 +79,25 @@ def test_summary_numbers_match_the_runs(zoo, tmp_path):
         np.testing.assert_array_equal(s.seed_final, [s.mean[-1]])  # nan where too few episodes ended
         assert s.seed_steps_to_90 == [s.steps_to_90]
     assert seeds_markdown(summaries).count("\n") == 1 + len(summaries)
+
+
+def test_steps_ratio_is_bounded_where_a_curve_never_gets_there():
+    grid = np.linspace(6_000, 300_000, 50)
+
+    def cell(name, seeds, steps, mean_steps):
+        nan = np.full(50, np.nan)
+        return CellSummary(cell=name, seeds=seeds, mean=nan, low=nan, high=nan, usage=nan, steps_to_50=None,
+                           steps_to_90=mean_steps, at_budgets={}, auc=0.0, final_alone=0.0, final_alone_seeds=[],
+                           fps=0.0, seed_steps_to_90=steps)
+
+    summaries = [cell("disagreement", [0, 1, 2, 3], [42_000, None, 60_000, None], 120_000),
+                 cell("scratch", [0, 1, 2], [210_000, 150_000, None], None)]
+    rows = ratio_markdown(grid, summaries).splitlines()[2:]
+    assert rows == ["| 0 | 42k | 210k | 0.20 |",
+                    "| 1 | not reached | 150k | > 2.00 |",
+                    "| 2 | 60k | not reached | < 0.20 |",  # seed 3 has no scratch run: no row
+                    "| mean curves | 120k | not reached | < 0.40 |"]
+    assert ratio_markdown(grid, summaries[:1]) is None
 
 
 def test_ray_backend_runs_two_tiny_runs(zoo, tmp_path):

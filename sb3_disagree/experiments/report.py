@@ -109,6 +109,39 @@ def seeds_markdown(summaries: list[CellSummary]) -> str:
     return "\n".join(lines)
 
 
+def _ratio(steps: Optional[float], baseline: Optional[float], end: float) -> str:
+    """``steps / baseline``; a curve that never reached the level counts as the run's length, which bounds the ratio."""
+    if steps is not None and baseline is not None:
+        return f"{steps / baseline:.2f}"
+    if steps is not None:
+        return f"< {steps / end:.2f}"
+    if baseline is not None:
+        return f"> {end / baseline:.2f}"
+    return "-"
+
+
+def ratio_markdown(grid: np.ndarray, summaries: list[CellSummary], cell: str = "disagreement",
+                   baseline: str = "scratch") -> Optional[str]:
+    """
+    Steps to 90% training success of ``cell`` over those of ``baseline``: per seed both ran, and from the
+    mean curves. Where a curve never gets there the run's length stands in, so the ratio is a bound.
+
+    :return: A Markdown table, or None when the experiment lacks one of the cells
+    """
+    by_name = {s.cell: s for s in summaries}
+    if cell not in by_name or baseline not in by_name:
+        return None
+    ours, theirs = by_name[cell], by_name[baseline]
+    lines = [f"| seed | {cell}: steps to 90% | {baseline}: steps to 90% | ratio |", "|---|---|---|---|"]
+    for seed, steps in zip(ours.seeds, ours.seed_steps_to_90):
+        if seed in theirs.seeds:
+            other = theirs.seed_steps_to_90[theirs.seeds.index(seed)]
+            lines.append(f"| {seed} | {_steps(steps)} | {_steps(other)} | {_ratio(steps, other, grid[-1])} |")
+    lines.append(f"| mean curves | {_steps(ours.steps_to_90)} | {_steps(theirs.steps_to_90)} | "
+                 f"{_ratio(ours.steps_to_90, theirs.steps_to_90, grid[-1])} |")
+    return "\n".join(lines)
+
+
 def plot(experiment: Experiment, grid: np.ndarray, summaries: list[CellSummary], out: Path, root: Path) -> None:
     """Training success (mean and 95% band) and prior usage against env steps; recorded paths if asked."""
     import matplotlib
