@@ -81,6 +81,19 @@ def test_summary_numbers_match_the_runs(zoo, tmp_path):
     assert seeds_markdown(summaries).count("\n") == 1 + len(summaries)
 
 
+def test_report_refuses_a_run_whose_monitor_files_miss_steps(zoo, tmp_path):
+    experiment = load_experiment(str(_grid(tmp_path, zoo, seeds=(0,))))
+    experiment.cells = {"scratch": experiment.cells["scratch"]}
+    out = tmp_path / "results"
+    run_experiment(experiment, out, jobs=1)
+    summarize(experiment, out)  # 320 steps, 2 envs: no episode ended yet, which one episode per env allows
+    result = out / "scratch" / "seed-0" / "result.json"
+    record = json.loads(result.read_text())
+    result.write_text(json.dumps({**record, "steps": 5_000}))  # as if the files had been cut short
+    with pytest.raises(ValueError, match="hold episodes of 0 env steps, but the run took 5,000"):
+        summarize(experiment, out)
+
+
 def test_steps_ratio_is_bounded_where_a_curve_never_gets_there():
     grid = np.linspace(6_000, 300_000, 50)
 

@@ -14,7 +14,7 @@ import numpy as np
 from gymnasium import spaces
 
 from sb3_disagree.envs.layout import CORRIDOR, Layout, default_layout
-from sb3_disagree.envs.navigation import MOVE_FORWARD, TURN_LEFT, TURN_RIGHT, NavigationEnv
+from sb3_disagree.envs.navigation import MAX_EPISODE_STEPS, MOVE_FORWARD, TURN_LEFT, TURN_RIGHT, NavigationEnv
 
 
 class ApartmentEnv(NavigationEnv):
@@ -47,7 +47,7 @@ class ApartmentEnv(NavigationEnv):
         obs: str = "rgb",
         obs_width: int = 80,
         obs_height: int = 60,
-        max_episode_steps: int = 500,
+        max_episode_steps: int = MAX_EPISODE_STEPS,
         forward_step: float = 0.25,
         turn_step: float = 30.0,
         step_penalty: float = 0.01,

@@ -10,6 +10,9 @@ from typing import Any, Optional
 import gymnasium as gym
 import numpy as np
 
+# Steps before an episode is truncated, unless an env is made with another max_episode_steps.
+MAX_EPISODE_STEPS = 500
+
 TURN_LEFT, TURN_RIGHT, MOVE_FORWARD = 0, 1, 2
 
 

@@ -19,7 +19,7 @@ from gymnasium import spaces
 
 from sb3_disagree.envs.grid import GridField
 from sb3_disagree.envs.mesh_scene import NavGrid, SceneGoals, goals_path, load_meshes, navigable_grid
-from sb3_disagree.envs.navigation import MOVE_FORWARD, TURN_LEFT, TURN_RIGHT, NavigationEnv
+from sb3_disagree.envs.navigation import MAX_EPISODE_STEPS, MOVE_FORWARD, TURN_LEFT, TURN_RIGHT, NavigationEnv
 
 DEFAULT_SCENE = Path(__file__).resolve().parent / "scenes" / "office.glb"
 
@@ -72,7 +72,7 @@ class ScanEnv(NavigationEnv):
         obs_height: int = 60,
         hfov: float = 90.0,
         camera_height: float = 1.25,
-        max_episode_steps: int = 500,
+        max_episode_steps: int = MAX_EPISODE_STEPS,
         forward_step: float = 0.25,
         turn_step: float = 30.0,
         agent_radius: float = 0.2,

@@ -11,7 +11,14 @@ from typing import Optional
 
 import numpy as np
 
-from sb3_disagree.experiments.curves import mean_and_band, progress_curve, steps_to, success_curve
+from sb3_disagree.envs.navigation import MAX_EPISODE_STEPS
+from sb3_disagree.experiments.curves import (
+    check_monitor_coverage,
+    mean_and_band,
+    progress_curve,
+    steps_to,
+    success_curve,
+)
 from sb3_disagree.experiments.spec import RESULT, Experiment
 
 GRID_POINTS = 50
@@ -62,6 +69,9 @@ def summarize(experiment: Experiment, root: Path) -> tuple[np.ndarray, list[Cell
             continue
         folders = [r.folder(root) for r in runs]
         records = [json.loads((f / RESULT).read_text()) for f in folders]
+        for run, folder, record in zip(runs, folders, records):
+            limit = run.config.env_kwargs.get("max_episode_steps", MAX_EPISODE_STEPS)
+            check_monitor_coverage(folder, record["steps"], run.config.n_envs, limit)
         curves = [success_curve(f, grid) for f in folders]
         mean, low, high = mean_and_band(curves)
         usage = np.full(len(grid), np.nan)
