@@ -38,17 +38,18 @@ def success_curve(run_dir: Path, grid: np.ndarray, window: int = 50, min_episode
     return out
 
 
-def check_monitor_coverage(run_dir: Path, steps: int, n_envs: int, max_episode_steps: int) -> None:
+def check_monitor_coverage(run_dir: Path, steps: int, n_envs: int, max_episode_steps: int, legs: int = 1) -> None:
     """
     Refuse a run whose monitor files hold fewer of its steps than it ran: each env's unfinished last
-    episode may be missing, no more. A training curve read from such files would hold its last value
-    (or, in a continued run, shift the later episodes back in time) without saying so.
+    episode of each leg (a continued run has two) may be missing, no more. A training curve read from
+    such files would hold its last value (or, in a continued run, shift the later episodes back in
+    time) without saying so.
 
     :raises ValueError: Naming the run and how much its files hold
     """
     files = sorted((run_dir / "monitor").glob("*.monitor.csv"))
     held = sum(int(pd.read_csv(f, skiprows=1)["l"].sum()) for f in files)
-    if held < steps - n_envs * max_episode_steps:
+    if held < steps - legs * n_envs * max_episode_steps:
         raise ValueError(f"{run_dir}: its monitor files hold episodes of {held:,} env steps, but the run took "
                          f"{steps:,}; its training curve cannot be read. Run it again: remove the folder and run "
                          "its experiment (finished runs are skipped)")

@@ -71,7 +71,8 @@ def summarize(experiment: Experiment, root: Path) -> tuple[np.ndarray, list[Cell
         records = [json.loads((f / RESULT).read_text()) for f in folders]
         for run, folder, record in zip(runs, folders, records):
             limit = run.config.env_kwargs.get("max_episode_steps", MAX_EPISODE_STEPS)
-            check_monitor_coverage(folder, record["steps"], run.config.n_envs, limit)
+            legs = 2 if "from_steps" in record else 1  # a continued run lost an unfinished episode per env twice
+            check_monitor_coverage(folder, record["steps"], run.config.n_envs, limit, legs=legs)
         curves = [success_curve(f, grid) for f in folders]
         mean, low, high = mean_and_band(curves)
         usage = np.full(len(grid), np.nan)
