@@ -25,13 +25,14 @@ ROOT = Path(__file__).resolve().parent / "results" / "experiments"
 SEED = 50_000  # starts no training or evaluation of the runs used
 
 
-def success_alone(run_dir: Path, episodes: int, deterministic: bool) -> float:
+def success_alone(run_dir: Path, episodes: int) -> tuple[float, float]:
+    """Success of the run's model alone with sampled and with greedy actions."""
     from sb3_disagree.acer import ACER
     from sb3_disagree.training import evaluate_alone
 
     config = yaml.safe_load((run_dir / "config.yaml").read_text())
     model = ACER.load(run_dir / "model.zip", device="cpu")
-    return evaluate_alone(model, config, episodes, deterministic, seed=SEED).success_rate
+    return tuple(evaluate_alone(model, config, episodes, greedy, seed=SEED).success_rate for greedy in (False, True))
 
 
 def main() -> None:
@@ -51,8 +52,7 @@ def main() -> None:
         folder = run.folder(ROOT / experiment.name)
         evals = np.load(folder / "evaluations.npz")
         steps, success = evals["timesteps"], evals["successes"].mean(axis=1)
-        sampled = success_alone(folder, args.episodes, deterministic=False)
-        greedy = success_alone(folder, args.episodes, deterministic=True)
+        sampled, greedy = success_alone(folder, args.episodes)
         ax.plot(steps, success, marker="o", ms=3, label=f"seed {run.seed}")
         reached = steps[success >= 0.95]
         rows.append(f"| {run.seed} | " + " | ".join(

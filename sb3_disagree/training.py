@@ -284,7 +284,6 @@ def train(config: RunConfig, out: Path = Path("runs"), resume: Optional[Path] = 
     return run_dir, model, finished
 
 
-
 def evaluate_alone(model: ACER, config: dict[str, Any], episodes: int, deterministic: bool, seed: int):
     """
     The new policy alone (no priors) in its run's task, on 4 envs seeded from ``seed``.

@@ -25,22 +25,13 @@ from sb3_disagree.files import write_atomic
 BACKENDS = ("local", "ray")
 
 
-# What a continuation must share with the run it continues (everything but the budget).
-SAME = ("goal", "env_id", "mode", "alpha", "beta", "seed", "n_envs", "acer_kwargs")
-
-
-def _start_from(source: Path, folder: Path, run: Run) -> int:
-    """Copy a finished run into ``folder`` (afresh, so a stopped continuation starts again) to continue it;
-    :return: its env steps."""
-    saved = yaml.safe_load((source / "config.yaml").read_text())
-    wanted = asdict(run.config)
-    differ = [k for k in SAME if saved.get(k) != wanted[k]]
-    if differ:
-        raise ValueError(f"{source} was trained with other {', '.join(differ)} than {run.cell} seed {run.seed}")
+def _start_from(source: Path, folder: Path) -> int:
+    """Copy a finished run (checked by ``Run.source``) into ``folder`` to continue it, afresh, so that a
+    stopped continuation starts again; :return: its env steps."""
     if folder.exists():
         shutil.rmtree(folder)
     shutil.copytree(source, folder, ignore=shutil.ignore_patterns(RESULT))
-    return int(saved["num_timesteps"])
+    return int(yaml.safe_load((folder / "config.yaml").read_text())["num_timesteps"])
 
 
 def train_and_evaluate(run: Run, folder: Path, source: Optional[Path] = None) -> dict[str, Any]:
@@ -55,7 +46,7 @@ def train_and_evaluate(run: Run, folder: Path, source: Optional[Path] = None) ->
     th.set_num_threads(1)
     from sb3_disagree.training import evaluate_alone, train
 
-    begun = _start_from(source, folder, run) if source is not None else 0
+    begun = _start_from(source, folder) if source is not None else 0
     start = time.perf_counter()
     if source is not None:
         run_dir, model, finished = train(run.config, resume=folder, steps=run.config.steps)
@@ -114,8 +105,8 @@ def run_experiment(
     """
     if backend not in BACKENDS:
         raise ValueError(f"--backend must be one of {', '.join(BACKENDS)}, got {backend!r}")
-    todo = [r for r in experiment.runs() if not r.finished(root)]
-    sources = {id(r): r.source(root, experiment.continues) for r in todo}  # all there before anything starts
+    # Each unfinished run with the run it continues, all checked before anything starts.
+    todo = [(r, r.source(root, experiment.continues)) for r in experiment.runs() if not r.finished(root)]
     results: list[dict[str, Any]] = []
 
     def done(result: dict[str, Any]) -> None:
@@ -130,7 +121,7 @@ def run_experiment(
 
         ray.init(address=address, include_dashboard=False, log_to_driver=False, ignore_reinit_error=True)
         task = ray.remote(num_cpus=1)(_ray_task)
-        pending = {task.remote(r, _files(sources[id(r)]) if sources[id(r)] else None): r for r in todo}
+        pending = {task.remote(r, _files(source) if source else None): r for r, source in todo}
         while pending:
             ready, _ = ray.wait(list(pending), num_returns=1)
             run = pending.pop(ready[0])
@@ -138,11 +129,11 @@ def run_experiment(
             _unpack(run.folder(root), files)
             done(result)
     elif (jobs or os.cpu_count() or 1) == 1:
-        for r in todo:
-            done(train_and_evaluate(r, r.folder(root), sources[id(r)]))
+        for r, source in todo:
+            done(train_and_evaluate(r, r.folder(root), source))
     else:
         with ProcessPoolExecutor(jobs or os.cpu_count()) as pool:
-            futures = [pool.submit(train_and_evaluate, r, r.folder(root), sources[id(r)]) for r in todo]
+            futures = [pool.submit(train_and_evaluate, r, r.folder(root), source) for r, source in todo]
             for future in as_completed(futures):
                 done(future.result())
     return results

@@ -25,7 +25,7 @@ repeating the first steps. The replay buffer is not kept at the end of a finishe
 starts with an empty one.
 """
 
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any, Optional
 
@@ -36,6 +36,8 @@ from sb3_disagree.training import ACER_KWARGS, RunConfig
 # Experiments shipped with the repository; a path to any YAML file works too.
 SHIPPED = Path(__file__).resolve().parents[2] / "benchmarks" / "experiments"
 RESULT = "result.json"
+# What a continuation must share with the run it continues (everything but the budget).
+SAME = ("goal", "env_id", "mode", "alpha", "beta", "seed", "n_envs", "acer_kwargs")
 
 
 @dataclass
@@ -54,13 +56,18 @@ class Run:
         return (self.folder(root) / RESULT).exists()
 
     def source(self, root: Path, continues: Optional[str]) -> Optional[Path]:
-        """The finished run this one continues (beside ``root``), or None; an error if it is not there."""
+        """The finished run this one continues (beside ``root``), or None; an error if it is not there or was
+        trained with other settings than this run's."""
         if continues is None:
             return None
         source = self.folder(root.parent / continues)
         if not (source / RESULT).exists() or not (source / "model.zip").exists():
             raise FileNotFoundError(f"{self.cell} seed {self.seed} continues {source}, which is not a finished run "
                                     f"with its model; run first: dopt experiment run {continues}")
+        saved, wanted = yaml.safe_load((source / "config.yaml").read_text()), asdict(self.config)
+        differ = [k for k in SAME if saved.get(k) != wanted[k]]
+        if differ:
+            raise ValueError(f"{source} was trained with other {', '.join(differ)} than {self.cell} seed {self.seed}")
         return source
 
 
