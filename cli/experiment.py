@@ -56,7 +56,8 @@ def run(
 
         def show(result: dict) -> None:
             console.print(f"  {result['cell']} seed {result['seed']}: {result['steps']:,} steps in "
-                          f"{result['seconds']:.0f} s; the new policy alone {result['final_alone']['success_rate']:.2f}")
+                          f"{result['seconds']:.0f} s; the new policy alone {result['final_alone']['success_rate']:.2f}"
+                          + (f" (copied from {result['copied_from']})" if "copied_from" in result else ""))
 
         run_experiment(experiment, root, backend=backend, jobs=jobs, address=address, on_result=show)
 

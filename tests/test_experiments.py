@@ -166,12 +166,44 @@ def test_continuing_an_experiment_extends_its_runs(zoo, tmp_path):
     assert result.exit_code == 2 and "trained with other n_envs" in result.output
 
 
+def test_a_cell_same_as_another_experiments_run_is_copied_not_trained(zoo, tmp_path, monkeypatch):
+    """``same_as``: a finished run of the same configuration is taken as it is; another configuration is refused."""
+    from sb3_disagree.experiments import runner as runner_module
+
+    short = _grid(tmp_path, zoo, seeds=(0,))
+    results = tmp_path / "results"
+    assert runner.invoke(app, ["experiment", "run", str(short), "--jobs", "1", "--cells", "scratch",
+                               "--out", str(results / "tiny")]).exit_code == 0
+    spec = yaml.safe_load(short.read_text())
+    spec.update(name="ablation", cells={"same": {"mode": "scratch", "same_as": "tiny/scratch"}})
+    path = tmp_path / "ablation.yaml"
+    path.write_text(yaml.safe_dump(spec))
+
+    def no_training(*args, **kwargs):
+        raise AssertionError("a run with a finished twin was trained")
+
+    monkeypatch.setattr(runner_module, "train_and_evaluate", no_training)
+    done = run_experiment(load_experiment(str(path)), results / "ablation", jobs=1)
+    source, copy = results / "tiny" / "scratch" / "seed-0", results / "ablation" / "same" / "seed-0"
+    assert [r["cell"] for r in done] == ["same"] and done[0]["copied_from"] == str(source)
+    assert (copy / "progress.csv").read_bytes() == (source / "progress.csv").read_bytes()
+    original = json.loads((source / "result.json").read_text())
+    assert json.loads((copy / "result.json").read_text())["final_alone"] == original["final_alone"]
+    # Another configuration under the same name is an error, before anything runs.
+    spec.update(name="other", cells={"same": {"mode": "scratch", "alpha": 3, "same_as": "tiny/scratch"}})
+    path.write_text(yaml.safe_dump(spec))
+    with pytest.raises(ValueError, match="differs in alpha"):
+        run_experiment(load_experiment(str(path)), results / "other", jobs=1)
+    assert not (results / "other").exists()
+
+
 @pytest.mark.parametrize("bad,message", [
     ({"cells": {}}, "at least one cell"),
     ({"cells": {"a": {"mode": "nonsense"}}}, "--mode"),
     ({"cells": {"a": {"gamma": 0.9}}}, "unknown run fields"),
     ({"cells": {"a": {"beta": -1}}}, "--beta"),
     ({"typo": 1, "cells": {"a": {}}}, "unknown keys"),
+    ({"cells": {"a": {"same_as": "fig3-bathtub"}}}, "same_as must read OTHER/CELL"),
 ])
 def test_bad_experiment_files_are_clear_errors(tmp_path, bad, message):
     path = tmp_path / "bad.yaml"

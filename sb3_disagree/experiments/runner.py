@@ -34,6 +34,17 @@ def _start_from(source: Path, folder: Path) -> int:
     return int(yaml.safe_load((folder / "config.yaml").read_text())["num_timesteps"])
 
 
+def copy_run(run: Run, source: Path, folder: Path) -> dict[str, Any]:
+    """Take a finished run of the same configuration (checked by ``Run.copy_source``) as this one;
+    :return: its result, relabelled with this run's cell."""
+    if folder.exists():
+        shutil.rmtree(folder)
+    shutil.copytree(source, folder, ignore=shutil.ignore_patterns(RESULT))
+    result = {**json.loads((source / RESULT).read_text()), "cell": run.cell, "copied_from": str(source)}
+    write_atomic(folder / RESULT, json.dumps(result, indent=2) + "\n")
+    return result
+
+
 def train_and_evaluate(run: Run, folder: Path, source: Optional[Path] = None) -> dict[str, Any]:
     """
     Train one run into ``folder``, evaluate the new policy alone, and write ``result.json``.
@@ -105,8 +116,10 @@ def run_experiment(
     """
     if backend not in BACKENDS:
         raise ValueError(f"--backend must be one of {', '.join(BACKENDS)}, got {backend!r}")
-    # Each unfinished run with the run it continues, all checked before anything starts.
-    todo = [(r, r.source(root, experiment.continues)) for r in experiment.runs() if not r.finished(root)]
+    # Each unfinished run with the run it continues or repeats, all checked before anything starts.
+    unfinished = [r for r in experiment.runs() if not r.finished(root)]
+    copies = [(r, r.copy_source(root)) for r in unfinished]
+    todo = [(r, r.source(root, experiment.continues)) for r, copy in copies if copy is None]
     results: list[dict[str, Any]] = []
 
     def done(result: dict[str, Any]) -> None:
@@ -114,6 +127,9 @@ def run_experiment(
         if on_result:
             on_result(result)
 
+    for r, copy in copies:
+        if copy is not None:
+            done(copy_run(r, copy, r.folder(root)))
     if not todo:
         return results
     if backend == "ray":

@@ -23,9 +23,15 @@ Each cell's mapping overrides RunConfig fields (``mode``, ``alpha``, ``beta``, .
 from the results folder beside this one) to this experiment's larger ``steps``: longer budgets without
 repeating the first steps. The replay buffer is not kept at the end of a finished run, so a continuation
 starts with an empty one.
+
+A cell may say ``same_as: OTHER/CELL`` where its runs are, seed for seed, runs another experiment already
+makes with the same configuration (the ablations' defaults are Figure 3's runs): a finished run there is
+copied (runs are deterministic given their configuration and seed) instead of trained again; one with
+another configuration is an error, and one not finished yet is trained here.
 """
 
-from dataclasses import asdict, dataclass, field
+import json
+from dataclasses import MISSING, asdict, dataclass, field
 from pathlib import Path
 from typing import Any, Optional
 
@@ -48,6 +54,7 @@ class Run:
     seed: int
     config: RunConfig
     final_episodes: int
+    same_as: Optional[str] = None
 
     def folder(self, root: Path) -> Path:
         return root / self.cell / f"seed-{self.seed}"
@@ -68,6 +75,27 @@ class Run:
         differ = [k for k in SAME if saved.get(k) != wanted[k]]
         if differ:
             raise ValueError(f"{source} was trained with other {', '.join(differ)} than {self.cell} seed {self.seed}")
+        return source
+
+    def copy_source(self, root: Path) -> Optional[Path]:
+        """The finished run of ``same_as`` (beside ``root``) that this run would repeat, or None where there
+        is none yet; an error if that run was trained with another configuration or evaluation."""
+        if self.same_as is None:
+            return None
+        experiment, cell = self.same_as.split("/")
+        source = root.parent / experiment / cell / f"seed-{self.seed}"
+        if not (source / RESULT).exists():
+            return None
+        result = json.loads((source / RESULT).read_text())
+        saved, wanted = result.get("config", {}), asdict(self.config)
+        # A field newer than the record ran at its default.
+        defaults = {k: f.default for k, f in RunConfig.__dataclass_fields__.items() if f.default is not MISSING}
+        differ = [k for k in wanted if saved.get(k, defaults.get(k)) != wanted[k]]
+        if result.get("final_alone", {}).get("episodes") != self.final_episodes:
+            differ.append("final_episodes")
+        if differ:
+            raise ValueError(f"{self.cell} seed {self.seed} is same_as {self.same_as}, but {source} differs in "
+                             f"{', '.join(differ)}")
         return source
 
 
@@ -124,6 +152,10 @@ class Experiment:
         for seed in self.seeds:
             for cell, overrides in self.cells.items():
                 overrides = dict(overrides or {})
+                same_as = overrides.pop("same_as", None)
+                if same_as is not None and (not isinstance(same_as, str) or same_as.count("/") != 1):
+                    raise ValueError(f"experiment {self.name!r}, cell {cell!r}: same_as must read OTHER/CELL, "
+                                     f"got {same_as!r}")
                 acer = {**ACER_KWARGS, **self.acer, **overrides.pop("acer", {})}
                 fields = {**self.run, **overrides}
                 unknown = set(fields) - set(RunConfig.__dataclass_fields__)
@@ -132,7 +164,7 @@ class Experiment:
                 config = RunConfig(goal=self.goal, env_id=self.env_id, priors=self.priors, steps=self.steps, seed=seed,
                                    acer_kwargs=acer, **fields)
                 config.validate()
-                out.append(Run(cell, seed, config, self.final_episodes))
+                out.append(Run(cell, seed, config, self.final_episodes, same_as))
         return out
 
 
