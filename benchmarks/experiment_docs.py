@@ -3,13 +3,17 @@ An experiment's report into the docs: the figure into docs/images/NAME.png and t
 commands, seeds, budget and machine, into the NAME section of docs/results.md.
 
     dopt experiment run NAME --jobs 2 [--seeds 0,1,2]
-    python benchmarks/experiment_docs.py NAME
+    python benchmarks/experiment_docs.py NAME [--seeds 0,1]
+
+``--seeds`` reports only those seeds, so that cells with more finished seeds than others are compared on
+the same ones.
 """
 
+import argparse
 import os
 import platform
-import sys
 from pathlib import Path
+from typing import Optional
 
 import yaml
 from docs_section import DOCS, write_section
@@ -20,12 +24,13 @@ from sb3_disagree.experiments.spec import load_experiment
 ROOT = Path(__file__).resolve().parent / "results" / "experiments"
 
 
-def main(name: str) -> None:
+def main(name: str, only_seeds: Optional[list[int]] = None) -> None:
     experiment = load_experiment(name)
+    experiment.restrict(seeds=only_seeds)
     root = ROOT / experiment.name
     grid, summaries = summarize(experiment, root)
     if not summaries:
-        sys.exit(f"no finished runs of {name} under {root}")
+        raise SystemExit(f"no finished runs of {name} under {root}")
     figure = DOCS / "images" / f"{experiment.name}.png"
     plot(experiment, grid, summaries, figure, root)
     seeds = sorted({s for c in summaries for s in c.seeds})
@@ -36,9 +41,20 @@ def main(name: str) -> None:
         continued = (f"Each run continues `{experiment.continues}`'s finished run of the same cell and seed (`continues:` "
                      f"in the YAML): its first {', '.join(f'{b:,}' for b in begun)} env steps are that run's, and the "
                      "replay buffer starts empty where it continues; env steps/s is the continuation's. ")
+    copied = sorted({f"{c.cell} = `{r['copied_from'].split('experiments/')[-1].rsplit('/seed-', 1)[0]}`"
+                     for c in summaries for r in c.records if "copied_from" in r})
+    if copied:
+        continued += (f"Runs taken from another experiment (`same_as:` in the YAML; the same configuration and seed, "
+                      f"and runs are deterministic): {', '.join(copied)}. ")
+    per_cell = {c.cell: sorted(c.seeds) for c in summaries}
+    if len({tuple(v) for v in per_cell.values()}) == 1:
+        seeds_text = f"Seeds {', '.join(map(str, seeds))}"
+    else:
+        seeds_text = "Seeds per cell: " + "; ".join(f"{k} {', '.join(map(str, v))}" for k, v in per_cell.items())
+    restricted = f" --seeds {','.join(map(str, only_seeds))}" if only_seeds else ""
     body = (f"Commands: `dopt experiment run {name} --jobs 2 --seeds {','.join(map(str, seeds))}` then "
-            f"`python benchmarks/experiment_docs.py {name}` (grid: `benchmarks/experiments/{name}.yaml`). "
-            f"Seeds {', '.join(map(str, seeds))}; {experiment.steps:,} env steps per run; {platform.machine()}, "
+            f"`python benchmarks/experiment_docs.py {name}{restricted}` (grid: `benchmarks/experiments/{name}.yaml`). "
+            f"{seeds_text}; {experiment.steps:,} env steps per run; {platform.machine()}, "
             f"{os.cpu_count()} cores, two runs at a time, one torch thread each. ACER: "
             f"{yaml.safe_dump(acer, default_flow_style=True, width=200).strip()}. {continued}\n\n"
             f"![{experiment.name}](images/{figure.name})\n\n{table_markdown(experiment, summaries)}\n\n"
@@ -59,4 +75,8 @@ def main(name: str) -> None:
 
 
 if __name__ == "__main__":
-    main(sys.argv[1])
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("name")
+    parser.add_argument("--seeds", help="only these seeds: 0,1,2")
+    args = parser.parse_args()
+    main(args.name, [int(s) for s in args.seeds.split(",")] if args.seeds else None)
