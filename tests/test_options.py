@@ -163,3 +163,41 @@ def test_parameters_out_of_range_are_refused():
         DisagreementOptions(FakePriors(_priors(AGREE, 1)), beta=-0.1)
     with pytest.raises(ValueError, match="alpha"):
         DisagreementOptions(FakePriors(_priors(AGREE, 1)), alpha=0)
+
+
+class _ImageEnv:
+    """The smallest image env SB3's CNN policies accept (models are only built, never trained)."""
+
+    def __new__(cls):
+        import gymnasium as gym
+        from gymnasium import spaces
+
+        class Env(gym.Env):
+            observation_space = spaces.Box(0, 255, (36, 36, 3), np.uint8)
+            action_space = spaces.Discrete(3)
+
+            def reset(self, seed=None, options=None):
+                return self.observation_space.sample(), {}
+
+            def step(self, action):
+                return self.observation_space.sample(), 0.0, False, False, {}
+
+        return Env()
+
+
+def test_prior_probabilities_equal_each_policys_own_distribution():
+    """ACER priors skip SB3's distribution object, other priors do not; both give what get_distribution
+    gives, also when they share a batch (an image batch preprocessed twice would not)."""
+    from stable_baselines3 import PPO
+
+    from sb3_disagree.acer import ACER
+    from sb3_disagree.options.priors import PriorSet
+
+    priors = [ACER("CnnPolicy", _ImageEnv(), seed=0), PPO("CnnPolicy", _ImageEnv(), seed=1),
+              ACER("CnnPolicy", _ImageEnv(), seed=2)]
+    obs = np.random.default_rng(0).integers(0, 256, (4, 3, 36, 36), dtype=np.uint8)
+    got = PriorSet(priors).probs(obs)
+    for i, prior in enumerate(priors):
+        with th.no_grad():
+            expected = prior.policy.get_distribution(prior.policy.obs_to_tensor(obs)[0]).distribution.probs
+        assert th.equal(got[i], expected), i
