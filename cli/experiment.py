@@ -30,13 +30,25 @@ def list_experiments() -> None:
     console.print(t)
 
 
+SEEDS_OPT = typer.Option(None, "--seeds", help="Only these of the experiment's seeds: 0,1,2")
+
+
+def _seeds(text: Optional[str]) -> Optional[list[int]]:
+    if not text:
+        return None
+    try:
+        return [int(s) for s in text.split(",")]
+    except ValueError:
+        raise ValueError(f"--seeds takes whole numbers separated by commas, got {text!r}") from None
+
+
 @app.command("run")
 def run(
     name: str = typer.Argument(..., help="A shipped experiment's name, or a YAML file."),
     backend: str = typer.Option("local", "--backend", help="local (a process pool) or ray."),
     jobs: Optional[int] = typer.Option(None, "--jobs", help="Runs at a time on the local backend (default: cores)."),
     address: Optional[str] = typer.Option(None, "--address", help="Ray cluster address (default: a local Ray)."),
-    seeds: Optional[str] = typer.Option(None, "--seeds", help="Only these of the experiment's seeds: 0,1,2"),
+    seeds: Optional[str] = SEEDS_OPT,
     cells: Optional[str] = typer.Option(None, "--cells", help="Only these cells: a,b"),
     out: Optional[Path] = OUT_OPT,
 ) -> None:
@@ -46,7 +58,7 @@ def run(
         from sb3_disagree.experiments.spec import load_experiment
 
         experiment = load_experiment(name)
-        experiment.restrict(seeds=[int(s) for s in seeds.split(",")] if seeds else None,
+        experiment.restrict(seeds=_seeds(seeds),
                             cells=[c.strip() for c in cells.split(",")] if cells else None)
         root = _root(experiment.name, out)
         runs = experiment.runs()
@@ -67,8 +79,10 @@ def report(
     name: str = typer.Argument(..., help="A shipped experiment's name, or a YAML file."),
     out: Optional[Path] = OUT_OPT,
     figure: Optional[Path] = typer.Option(None, "--figure", help="Also write the figure here (PNG)."),
+    seeds: Optional[str] = SEEDS_OPT,
 ) -> None:
-    """Curves (mean and 95% band over seeds) and the table; writes report.md and a PNG in the results folder."""
+    """Curves (mean and 95% band over seeds) and the table; writes report.md and a PNG in the results folder.
+    ``--seeds`` compares cells on the seeds they share where some have more finished than others."""
     with clean_errors():
         import shutil
 
@@ -76,6 +90,7 @@ def report(
         from sb3_disagree.experiments.spec import load_experiment
 
         experiment = load_experiment(name)
+        experiment.restrict(seeds=_seeds(seeds))
         root = _root(experiment.name, out)
         grid, summaries = summarize(experiment, root)
         if not summaries:

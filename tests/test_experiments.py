@@ -59,6 +59,10 @@ def test_run_report_and_skip_finished(zoo, tmp_path):
     assert (out / "tiny.png").stat().st_size > 0 and (tmp_path / "f.png").exists()
     text = (out / "report.md").read_text()
     assert "| scratch | 1 |" in text and "success at 0.32k" in text
+    # The report can be restricted to seeds, but only to the experiment's own.
+    assert runner.invoke(app, ["experiment", "report", str(path), "--out", str(out), "--seeds", "0"]).exit_code == 0
+    report = runner.invoke(app, ["experiment", "report", str(path), "--out", str(out), "--seeds", "1"])
+    assert report.exit_code == 2 and "not among" in report.output
 
 
 def test_summary_numbers_match_the_runs(zoo, tmp_path):
