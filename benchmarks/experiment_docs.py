@@ -59,7 +59,7 @@ def main(name: str, only_seeds: Optional[list[int]] = None) -> None:
             f"{yaml.safe_dump(acer, default_flow_style=True, width=200).strip()}. {continued}\n\n"
             f"![{experiment.name}](images/{figure.name})\n\n{table_markdown(experiment, summaries)}\n\n"
             "Solid lines: training success (the last 50 episodes over all envs, priors included where they were "
-            "followed), mean over seeds with a 95% t-interval; dashed: the new policy alone (no priors, sampled "
+            "followed), mean over seeds with a 95% t-interval (none with fewer than 3 seeds); dashed: the new policy alone (no priors, sampled "
             "actions, 20 episodes every 20k steps). Table: steps to 50%/90% and success at the budgets read from "
             "the mean training curve; AUC is the mean of that curve over the run; the new policy alone (final) is "
             f"evaluated over {experiment.final_episodes} episodes after training, per seed in brackets.\n\n"

@@ -24,6 +24,9 @@ from sb3_disagree.experiments.spec import RESULT, Experiment
 GRID_POINTS = 50
 
 
+MIN_SEEDS_FOR_BAND = 3
+
+
 @dataclass
 class CellSummary:
     """What the report says about one cell, over its finished seeds."""
@@ -169,8 +172,12 @@ def plot(experiment: Experiment, grid: np.ndarray, summaries: list[CellSummary],
     path_axes = [fig.add_subplot(grid_spec[1, 2 * j:2 * j + 2]) for j in range(n_paths)]
     colors = plt.get_cmap("tab10")
     for i, s in enumerate(summaries):
-        ax1.plot(grid, s.mean, color=colors(i), label=f"{s.cell} ({len(s.seeds)} seed{'s' if len(s.seeds) > 1 else ''})")
-        ax1.fill_between(grid, np.clip(s.low, 0, 1), np.clip(s.high, 0, 1), color=colors(i), alpha=0.2)
+        # With two seeds the t-interval (t = 12.7) spans the whole axis and hides the curves: no band then.
+        banded = len(s.seeds) >= MIN_SEEDS_FOR_BAND
+        label = f"{s.cell} ({len(s.seeds)} seed{'s' if len(s.seeds) > 1 else ''}{'' if banded or len(s.seeds) == 1 else ', no band'})"
+        ax1.plot(grid, s.mean, color=colors(i), label=label)
+        if banded:
+            ax1.fill_between(grid, np.clip(s.low, 0, 1), np.clip(s.high, 0, 1), color=colors(i), alpha=0.2)
         if len(s.alone_steps):
             ax1.plot(s.alone_steps, s.alone_mean, "--o", color=colors(i), markersize=3, linewidth=1)
         if not np.all(np.isnan(s.usage)):
