@@ -41,8 +41,8 @@ def main(name: str, only_seeds: Optional[list[int]] = None) -> None:
         continued = (f"Each run continues `{experiment.continues}`'s finished run of the same cell and seed (`continues:` "
                      f"in the YAML): its first {', '.join(f'{b:,}' for b in begun)} env steps are that run's, and the "
                      "replay buffer starts empty where it continues; env steps/s is the continuation's. ")
-    copied = sorted({f"{c.cell} = `{r['copied_from'].split('experiments/')[-1].rsplit('/seed-', 1)[0]}`"
-                     for c in summaries for r in c.records if "copied_from" in r})
+    copied = [f"{c.cell} = `{experiment.cells[c.cell]['same_as']}`" for c in summaries
+              if any("copied_from" in r for r in c.records)]
     if copied:
         continued += (f"Runs taken from another experiment (`same_as:` in the YAML; the same configuration and seed, "
                       f"and runs are deterministic): {', '.join(copied)}. ")

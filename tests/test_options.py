@@ -186,8 +186,8 @@ class _ImageEnv:
 
 
 def test_prior_probabilities_equal_each_policys_own_distribution():
-    """ACER priors skip SB3's distribution object, other priors do not; both give what get_distribution
-    gives, also when they share a batch (an image batch preprocessed twice would not)."""
+    """Priors of different algorithms that share one converted batch each give what their own
+    get_distribution gives (an image batch preprocessed twice would not)."""
     from stable_baselines3 import PPO
 
     from sb3_disagree.acer import ACER

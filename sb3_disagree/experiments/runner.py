@@ -25,21 +25,24 @@ from sb3_disagree.files import write_atomic
 BACKENDS = ("local", "ray")
 
 
-def _start_from(source: Path, folder: Path) -> int:
-    """Copy a finished run (checked by ``Run.source``) into ``folder`` to continue it, afresh, so that a
-    stopped continuation starts again; :return: its env steps."""
+def _copy_unfinished(source: Path, folder: Path) -> None:
+    """``source``'s files in ``folder`` (afresh) without its ``result.json``: not finished until written."""
     if folder.exists():
         shutil.rmtree(folder)
     shutil.copytree(source, folder, ignore=shutil.ignore_patterns(RESULT))
+
+
+def _start_from(source: Path, folder: Path) -> int:
+    """Copy a finished run (checked by ``Run.source``) into ``folder`` to continue it, afresh, so that a
+    stopped continuation starts again; :return: its env steps."""
+    _copy_unfinished(source, folder)
     return int(yaml.safe_load((folder / "config.yaml").read_text())["num_timesteps"])
 
 
 def copy_run(run: Run, source: Path, folder: Path) -> dict[str, Any]:
     """Take a finished run of the same configuration (checked by ``Run.copy_source``) as this one;
     :return: its result, relabelled with this run's cell."""
-    if folder.exists():
-        shutil.rmtree(folder)
-    shutil.copytree(source, folder, ignore=shutil.ignore_patterns(RESULT))
+    _copy_unfinished(source, folder)
     result = {**json.loads((source / RESULT).read_text()), "cell": run.cell, "copied_from": str(source)}
     write_atomic(folder / RESULT, json.dumps(result, indent=2) + "\n")
     return result

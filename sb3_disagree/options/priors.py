@@ -5,9 +5,6 @@ from typing import Any
 
 import torch as th
 from stable_baselines3.common.base_class import BaseAlgorithm
-from stable_baselines3.common.preprocessing import preprocess_obs
-
-from sb3_disagree.acer.policies import ACERPolicy
 
 
 class PriorSet:
@@ -47,16 +44,8 @@ class PriorSet:
         """
         out, converted = [], {}
         for prior, j in zip(self.priors, self._converter):
-            policy = prior.policy
-            acer = isinstance(policy, ACERPolicy)
-            if (j, acer) not in converted:
-                obs = policy.obs_to_tensor(observations)[0].to(policy.device)
-                # ACER priors take the preprocessed batch once per space, as extract_features would make it.
-                converted[j, acer] = preprocess_obs(obs, policy.observation_space, policy.normalize_images) if acer else obs
-            if acer:
-                logits = policy.net.logits(policy.net.features_extractor(converted[j, acer]))
-                # The same arithmetic as Categorical(logits=...).probs, without building the distribution.
-                out.append(th.softmax(logits - logits.logsumexp(-1, keepdim=True), -1))
-            else:
-                out.append(policy.get_distribution(converted[j, acer]).distribution.probs)
+            if j not in converted:
+                converted[j] = prior.policy.obs_to_tensor(observations)[0]
+            obs = converted[j].to(prior.policy.device)
+            out.append(prior.policy.get_distribution(obs).distribution.probs)
         return th.stack(out)
