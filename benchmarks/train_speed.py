@@ -1,9 +1,11 @@
 """
 End-to-end training throughput on the apartment RGB: `dopt train` with disagreement options (and from
-scratch) against SB3's PPO CnnPolicy on the same env, one after another in the same process, each for
-the same number of env steps after its own warm-up; written into docs/benchmarks.md.
+scratch, each with and without ``--overlap``) against SB3's PPO CnnPolicy on the same env, one after
+another in the same process, each for the same number of env steps after its own warm-up; with
+``--repeats N`` the rows are measured N times, interleaved, and the table gives the median and range.
+Written into docs/benchmarks.md.
 
-    python benchmarks/train_speed.py --steps 6000 [--threads 2] [--vec-env dummy subproc] [--write]
+    python benchmarks/train_speed.py --steps 6000 [--threads 2] [--vec-env dummy subproc] [--repeats 3] [--write]
 """
 
 import argparse
@@ -13,6 +15,7 @@ import time
 from pathlib import Path
 from tempfile import TemporaryDirectory
 
+import numpy as np
 import torch as th
 from stable_baselines3.common.callbacks import BaseCallback
 
@@ -33,12 +36,13 @@ class Rate(BaseCallback):
         return (self.num_timesteps - self.n0) / (time.perf_counter() - self.t0)
 
 
-def acer_rate(mode: str, steps: int, warm: int, vec_env: str) -> float:
+def acer_rate(mode: str, steps: int, warm: int, vec_env: str, overlap: bool = False) -> float:
     from sb3_disagree.training import RunConfig, train
 
     with TemporaryDirectory() as tmp:
         rate = Rate(warm)
-        config = RunConfig(goal="bathtub", mode=mode, priors=["shower", "toilet"], steps=warm + steps, vec_env=vec_env)
+        config = RunConfig(goal="bathtub", mode=mode, priors=["shower", "toilet"], steps=warm + steps, vec_env=vec_env,
+                           overlap=overlap)
         train(config, Path(tmp), callbacks=[rate])
         return rate.rate()
 
@@ -64,23 +68,38 @@ def main() -> None:
     parser.add_argument("--warm", type=int, default=2_400, help="steps before timing (ACER's replay starts at 2k)")
     parser.add_argument("--threads", type=int, default=os.cpu_count())
     parser.add_argument("--vec-env", nargs="+", default=["dummy", "subproc"])
+    parser.add_argument("--repeats", type=int, default=1)
     parser.add_argument("--write", action="store_true")
     args = parser.parse_args()
     th.set_num_threads(args.threads)
-    rows = []
-    for vec_env in args.vec_env:
-        d = acer_rate("disagreement", args.steps, args.warm, vec_env)
-        s = acer_rate("scratch", args.steps, args.warm, vec_env)
-        p = ppo_rate(args.steps, args.warm, vec_env)
-        rows.append(f"| {vec_env} | {d:.0f} | {s:.0f} | {p:.0f} |")
-        print(rows[-1], flush=True)
+    columns = {
+        "dopt train, disagreement": lambda v: acer_rate("disagreement", args.steps, args.warm, v),
+        "dopt train --overlap, disagreement": lambda v: acer_rate("disagreement", args.steps, args.warm, v, True),
+        "dopt train, scratch": lambda v: acer_rate("scratch", args.steps, args.warm, v),
+        "dopt train --overlap, scratch": lambda v: acer_rate("scratch", args.steps, args.warm, v, True),
+        "SB3 PPO CnnPolicy": lambda v: ppo_rate(args.steps, args.warm, v),
+    }
+    rates: dict[tuple[str, str], list[float]] = {}
+    for _ in range(args.repeats):  # interleaved, so that a slow minute of the machine hits every column
+        for vec_env in args.vec_env:
+            for name, measure in columns.items():
+                rates.setdefault((vec_env, name), []).append(measure(vec_env))
+                print(vec_env, name, f"{rates[vec_env, name][-1]:.0f}", flush=True)
+
+    def cell(values: list[float]) -> str:
+        if len(values) == 1:
+            return f"{values[0]:.0f}"
+        return f"{np.median(values):.0f} ({min(values):.0f}-{max(values):.0f})"
+
+    rows = [f"| {v} | " + " | ".join(cell(rates[v, name]) for name in columns) + " |" for v in args.vec_env]
+    how = "one value per cell" if args.repeats == 1 else f"median (min-max) of {args.repeats} interleaved runs per cell"
     body = (f"Command: `python benchmarks/train_speed.py --steps {args.steps} --threads {args.threads} --vec-env "
-            f"{' '.join(args.vec_env)}`; {platform.machine()}, {os.cpu_count()} cores, {args.threads} torch threads, "
-            f"one run at a time on a quiet machine. Env steps/s over {args.steps} steps after a {args.warm}-step warm-up "
-            "(ACER's replay updates have started), apartment RGB 60x80, 4 envs; ACER with the defaults of "
-            "`dopt train`, PPO CnnPolicy with rl-zoo3's Atari settings (n_steps 128, 4 epochs, batch 256).\n\n"
-            "| envs | dopt train, disagreement | dopt train, scratch | SB3 PPO CnnPolicy |\n|---|---|---|---|\n"
-            + "\n".join(rows) + "\n")
+            f"{' '.join(args.vec_env)} --repeats {args.repeats}`; {platform.machine()}, {os.cpu_count()} cores, "
+            f"{args.threads} torch threads, one run at a time on a quiet machine; {how}. Env steps/s over {args.steps} "
+            f"steps after a {args.warm}-step warm-up (ACER's replay updates have started), apartment RGB 60x80, 4 envs; "
+            "ACER with the defaults of `dopt train`, PPO CnnPolicy with rl-zoo3's Atari settings (n_steps 128, "
+            "4 epochs, batch 256).\n\n"
+            "| envs | " + " | ".join(columns) + " |\n|---|" + "---|" * len(columns) + "\n" + "\n".join(rows) + "\n")
     if args.write:
         from docs_section import write_section
 

@@ -63,6 +63,8 @@ def train(
     eval_episodes: int = typer.Option(20, "--eval-episodes", help="Episodes per evaluation."),
     vec_env: str = typer.Option("dummy", "--vec-env", help="dummy (envs in this process) or subproc (one process "
                                 "per env)."),
+    overlap: bool = typer.Option(False, "--overlap/--no-overlap", help="Update in a second thread while the next "
+                                 "segment is collected (one segment behind; faster on two cores)."),
     out: Path = typer.Option(Path("runs"), "--out", help="Root folder of the runs."),
     resume: Optional[Path] = typer.Option(None, "--resume", help="A run folder to continue."),
 ) -> None:
@@ -73,7 +75,7 @@ def train(
         config = RunConfig(goal=goal, env_id=env, mode=mode,
                            priors="auto" if priors == "auto" else [p.strip() for p in priors.split(",") if p.strip()],
                            alpha=alpha, beta=beta, steps=100_000 if steps is None else steps, seed=seed, n_envs=n_envs,
-                           eval_every=eval_every, eval_episodes=eval_episodes, vec_env=vec_env,
+                           eval_every=eval_every, eval_episodes=eval_episodes, vec_env=vec_env, overlap=overlap,
                            embedding=str(embedding) if embedding else None, zoo=str(zoo) if zoo else None)
         if resume is None:
             config.validate()

@@ -56,6 +56,8 @@ class RunConfig:
     :param eval_episodes: Episodes per evaluation
     :param vec_env: "dummy" (envs stepped in this process) or "subproc" (one process per env: their
         rendering runs in parallel on several cores)
+    :param overlap: ACER's updates in a second thread while the next segment is collected with the
+        weights of one segment earlier (faster on two cores; see ``ACER``'s ``overlap``)
     """
 
     goal: str
@@ -75,6 +77,7 @@ class RunConfig:
     eval_every: int = 0
     eval_episodes: int = 20
     vec_env: str = "dummy"
+    overlap: bool = False
 
     def validate(self) -> None:
         if self.mode not in MODES:
@@ -254,13 +257,13 @@ def train(config: RunConfig, out: Path = Path("runs"), resume: Optional[Path] = 
         behaviour = make_options(config.mode, priors, config.alpha, config.beta, config.entropy_offset, seed=config.seed)
     saved_config = dict(asdict(config), chosen_priors=prior_names, similarities=sims)
     if resume is not None:
-        model = ACER.load(run_dir / "model.zip", env=env, behaviour=behaviour)
+        model = ACER.load(run_dir / "model.zip", env=env, behaviour=behaviour, overlap=config.overlap)
         if (run_dir / "replay_buffer.pkl").exists():
             model.load_replay_buffer(run_dir / "replay_buffer.pkl")
         remaining = max(config.steps - model.num_timesteps, 0)
     else:
         policy = "CnnPolicy" if len(env.observation_space.shape) == 3 else "MlpPolicy"
-        model = ACER(policy, env, seed=config.seed, behaviour=behaviour, **config.acer_kwargs)
+        model = ACER(policy, env, seed=config.seed, behaviour=behaviour, overlap=config.overlap, **config.acer_kwargs)
         remaining = config.steps
         (run_dir / "config.yaml").write_text(yaml.safe_dump(saved_config, sort_keys=False))
     model.set_logger(run_logger(run_dir, append=resume is not None))

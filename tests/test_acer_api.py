@@ -100,10 +100,11 @@ def test_rejects_continuous_actions():
         ACER("MlpPolicy", "Pendulum-v1")
 
 
-def test_learns_the_chain_with_a_fixed_seed():
+@pytest.mark.parametrize("overlap", [False, True])
+def test_learns_the_chain_with_a_fixed_seed(overlap):
     """A tiny learning test: the deterministic policy walks right to the goal of a 6-cell chain."""
     env = make_vec_env(lambda: ChainEnv(length=6, n_actions=3), n_envs=4, seed=3)
-    model = ACER("MlpPolicy", env, n_steps=10, seed=3, replay_start=200, gamma=0.9)
+    model = ACER("MlpPolicy", env, n_steps=10, seed=3, replay_start=200, gamma=0.9, overlap=overlap)
     model.learn(6_000)
     eval_env = make_vec_env(lambda: __import__("gymnasium").wrappers.TimeLimit(ChainEnv(6, 3), 20), n_envs=1)
     mean, _ = evaluate_policy(model, eval_env, n_eval_episodes=5, deterministic=True)
@@ -117,3 +118,72 @@ def test_progress_bar_and_tensorboard_run_name(tmp_path):
     runs = sorted(p.name for p in tmp_path.iterdir())
     assert runs == ["chain_1"] and list((tmp_path / "chain_1").glob("events.out.tfevents*"))
     assert model.num_timesteps == 60
+
+
+class Snapshots(BaseCallback):
+    """The acting policy's weights at the start of every rollout; raises KeyboardInterrupt at ``stop_at`` steps."""
+
+    def __init__(self, stop_at: int = 0) -> None:
+        super().__init__()
+        self.weights, self.stop_at = [], stop_at
+
+    def _on_rollout_start(self) -> None:
+        self.weights.append(th.cat([p.detach().flatten().clone() for p in self.model.policy.net.parameters()]))
+
+    def _on_step(self) -> bool:
+        if self.stop_at and self.num_timesteps >= self.stop_at:
+            raise KeyboardInterrupt
+        return True
+
+
+def _optimizer_steps(model: ACER) -> set:
+    return {int(state["step"]) for state in model.policy.optimizer.state_dict()["state"].values()}
+
+
+def _update_threads() -> list:
+    import threading
+
+    return [t for t in threading.enumerate() if t.name.startswith("acer-updates")]
+
+
+def test_overlap_acts_one_segment_behind_and_ends_synchronised(tmp_path):
+    snapshots = {}
+    for overlap in (False, True):
+        env = make_vec_env(ChainEnv, n_envs=2, seed=0)
+        model = ACER("MlpPolicy", env, n_steps=5, seed=0, replay_start=10, overlap=overlap)
+        threads = th.get_num_threads()
+        snapshots[overlap] = Snapshots()
+        model.learn(100, callback=snapshots[overlap])
+        assert th.get_num_threads() == threads and not _update_threads()
+        # Every collected segment was learned, and the policy that predict/save see holds the learner's
+        # final weights and optimizer state.
+        assert model.replay_buffer.n_stored == 10 and _optimizer_steps(model) == {model._n_updates}
+    sync, overlapped = snapshots[False].weights, snapshots[True].weights
+    assert th.equal(sync[0], overlapped[0]) and th.equal(overlapped[0], overlapped[1])  # segment 1: no update done yet
+    assert not th.equal(sync[0], sync[1]) and not th.equal(overlapped[1], overlapped[2])
+    model.save(tmp_path / "model.zip")
+    loaded = ACER.load(tmp_path / "model.zip")
+    obs = np.eye(5, dtype=np.float32)
+    assert loaded.overlap and np.array_equal(loaded.predict(obs, deterministic=True)[0],
+                                             model.predict(obs, deterministic=True)[0])
+
+
+def test_overlap_is_deterministic():
+    weights = []
+    for _ in range(2):
+        model = ACER("MlpPolicy", make_vec_env(ChainEnv, n_envs=2, seed=0), n_steps=5, seed=0, replay_start=10,
+                     overlap=True)
+        model.learn(200)
+        weights.append(th.cat([p.detach().flatten() for p in model.policy.parameters()]))
+    assert th.equal(weights[0], weights[1])
+
+
+def test_overlap_interrupted_learns_what_was_collected():
+    model = ACER("MlpPolicy", make_vec_env(ChainEnv, n_envs=2, seed=0), n_steps=5, seed=0, replay_start=10,
+                 overlap=True)
+    with pytest.raises(KeyboardInterrupt):
+        model.learn(1_000, callback=Snapshots(stop_at=42))  # in the fifth segment
+    assert model.replay_buffer.n_stored == 4 and _optimizer_steps(model) == {model._n_updates}
+    assert not _update_threads()
+    model.learn(60, reset_num_timesteps=False)  # and continues
+    assert model.replay_buffer.n_stored == 10

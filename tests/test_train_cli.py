@@ -72,6 +72,25 @@ def test_subprocess_envs_train_like_in_process_ones(zoo, tmp_path):
     assert len(list((run / "monitor").glob("*.monitor.csv"))) == 2
 
 
+def test_overlap_trains_evaluates_and_resumes(zoo, tmp_path):
+    import numpy as np
+
+    result = runner.invoke(app, _train_args(zoo, tmp_path, "--overlap", "--eval-every", "200", "--eval-episodes", "2"))
+    assert result.exit_code == 0, result.output
+    run = tmp_path / "sb3_disagree__ApartmentState-v0" / "bathtub" / "disagreement-0"
+    assert yaml.safe_load((run / "config.yaml").read_text())["overlap"] is True
+    assert list(np.load(run / "evaluations.npz")["timesteps"]) == [200, 400]
+    assert ACER.load(run / "model.zip").overlap
+    # An interrupted overlapped run saves what it learned and resumes overlapped.
+    config = RunConfig(goal="bathtub", env_id=STATE_ID, steps=600, n_envs=2, zoo=str(zoo), overlap=True, seed=1)
+    run, model, finished = train(config, tmp_path, callbacks=[StopAt(200)])
+    assert not finished and (run / "replay_buffer.pkl").exists()
+    result = runner.invoke(app, ["train", "--goal", "bathtub", "--resume", str(run)])
+    assert result.exit_code == 0, result.output
+    cfg = yaml.safe_load((run / "config.yaml").read_text())
+    assert cfg["finished"] and cfg["overlap"] is True and ACER.load(run / "model.zip").num_timesteps >= 600
+
+
 def test_eval_and_trajectory_picture(zoo, tmp_path):
     assert runner.invoke(app, _train_args(zoo, tmp_path)).exit_code == 0
     run = tmp_path / "sb3_disagree__ApartmentState-v0" / "bathtub" / "disagreement-0"

@@ -1,7 +1,9 @@
 """ACER: Sample Efficient Actor-Critic with Experience Replay (Wang et al. 2016), discrete actions."""
 
+import copy
 import io
 import pathlib
+from concurrent.futures import Future, ThreadPoolExecutor
 from typing import Any, ClassVar, Optional, TypeVar, Union
 
 import numpy as np
@@ -56,6 +58,11 @@ class ACER(BaseAlgorithm):
     :param delta: Bound of the trust region
     :param behaviour: The behaviour policy that chooses the actions during rollouts; sampling from the
         current policy if None. It is not saved with the model.
+    :param overlap: Update in a second thread while the next segment is collected: segment k is then
+        collected with the weights after the updates of segment k - 2 (one segment behind), which the
+        stored mu and the importance weights correct for. The two threads split torch's intra-op
+        threads; same number of updates per env step. ``self.policy`` (what callbacks, ``predict`` and ``save`` see) is the acting copy,
+        synchronised with the learner, optimizer state included, at every segment boundary.
     :param stats_window_size: Window size for the rollout logging, number of episodes to average
     :param tensorboard_log: The log location for tensorboard (if None, no logging)
     :param policy_kwargs: Additional arguments to be passed to the policy on creation
@@ -92,6 +99,7 @@ class ACER(BaseAlgorithm):
         alpha: float = 0.99,
         delta: float = 1.0,
         behaviour: Optional[BehaviourPolicy] = None,
+        overlap: bool = False,
         stats_window_size: int = 100,
         tensorboard_log: Optional[str] = None,
         policy_kwargs: Optional[dict[str, Any]] = None,
@@ -130,6 +138,7 @@ class ACER(BaseAlgorithm):
         self.alpha = alpha
         self.delta = delta
         self.behaviour = behaviour
+        self.overlap = overlap
         if _init_setup_model:
             self._setup_model()
 
@@ -265,8 +274,9 @@ class ACER(BaseAlgorithm):
 
     # ------------------------------------------------------------------ updates
 
-    def _update(self, segment: Segment) -> dict[str, float]:
-        """One gradient step of ACER on a (T, E) segment batch; returns statistics for logging."""
+    def _update(self, segment: Segment, policy: Optional[ACERPolicy] = None) -> dict[str, float]:
+        """One gradient step of ``policy`` (``self.policy`` if None) on a (T, E) segment batch; returns statistics."""
+        policy = self.policy if policy is None else policy
         n_steps, n_envs = segment.actions.shape
         n = n_steps * n_envs
         obs = th.as_tensor(segment.observations, device=self.device)
@@ -277,7 +287,7 @@ class ACER(BaseAlgorithm):
         dones = th.as_tensor(segment.dones, device=self.device)
         timeout_values = th.as_tensor(segment.timeout_values, device=self.device)
 
-        logits, q_all = self.policy.logits_and_q(obs)
+        logits, q_all = policy.logits_and_q(obs)
         probs_all = th.softmax(logits, dim=-1)
         values_all = (probs_all * q_all).sum(-1).detach()
         probs, q_values, values = probs_all[:n], q_all[:n], values_all[:n]
@@ -307,16 +317,16 @@ class ACER(BaseAlgorithm):
         (g,) = th.autograd.grad(objective * n, f)
         tr_scale = th.zeros(n, device=self.device)
         if self.trust_region:
-            average_probs = th.softmax(self.policy.average_logits(obs[:n]), dim=-1)
+            average_probs = th.softmax(policy.average_logits(obs[:n]), dim=-1)
             k = -average_probs / (f.detach() + EPS)
             g, tr_scale = trust_region_project(g, k, self.delta)
         loss = -(probs * g.detach()).sum() / n + self.q_coef * q_loss
 
-        self.policy.optimizer.zero_grad()
+        policy.optimizer.zero_grad()
         loss.backward()
-        grad_norm = th.nn.utils.clip_grad_norm_(self.policy.net.parameters(), self.max_grad_norm)
-        self.policy.optimizer.step()
-        self.policy.update_average(self.alpha)
+        grad_norm = th.nn.utils.clip_grad_norm_(policy.net.parameters(), self.max_grad_norm)
+        policy.optimizer.step()
+        policy.update_average(self.alpha)
         self._n_updates += 1
         return {
             "policy_loss": -terms.truncated_is.mean().item(),
@@ -335,19 +345,30 @@ class ACER(BaseAlgorithm):
 
         :param segment: The segment just collected
         """
-        self.policy.set_training_mode(True)
         self._update_learning_rate(self.policy.optimizer)
+        self._record_train(self._train_on(segment, self.policy))
+
+    def _train_on(self, segment: Segment, policy: ACERPolicy, rng: Optional[np.random.Generator] = None) -> dict[str, float]:
+        """The updates of one segment on ``policy``; the replay draws from ``rng`` (numpy's global one if None)."""
+        policy.set_training_mode(True)
         self.replay_buffer.add(segment)
-        stats = self._update(segment)
+        stats = self._update(segment, policy)
         n_replay = 0
         if self.replay_ratio > 0 and self.replay_buffer.size() >= self.replay_start:
-            n_replay = np.random.poisson(self.replay_ratio)
+            n_replay = int(np.random.poisson(self.replay_ratio) if rng is None else rng.poisson(self.replay_ratio))
             for _ in range(n_replay):
-                self._update(self.replay_buffer.sample())
+                self._update(self.replay_buffer.sample(rng), policy)
+        return {**stats, "replay_updates": n_replay}
+
+    def _record_train(self, stats: dict[str, float]) -> None:
         for key, value in stats.items():
             self.logger.record(f"train/{key}", value)
-        self.logger.record("train/replay_updates", n_replay)
         self.logger.record("train/n_updates", self._n_updates, exclude="tensorboard")
+
+    def _sync_policy(self, learner: ACERPolicy) -> None:
+        """Copy the learner (both networks and the optimizer state) into ``self.policy``."""
+        self.policy.load_state_dict(learner.state_dict())
+        self.policy.optimizer.load_state_dict(learner.optimizer.state_dict())
 
     def learn(
         self: SelfACER,
@@ -378,20 +399,61 @@ class ACER(BaseAlgorithm):
         callback.on_training_start(locals(), globals())
         assert self.env is not None
 
-        while self.num_timesteps < total_timesteps:
-            segment = self.collect_rollouts(self.env, callback)
-            if segment is None:
-                break
-            iteration += 1
-            self._update_current_progress_remaining(self.num_timesteps, total_timesteps)
-            self.behaviour_policy.record(self.logger)
-            self._record_tags()
-            self.train(segment)
-            if log_interval is not None and iteration % log_interval == 0:
-                self.dump_logs(iteration)
+        if not self.overlap:
+            while self.num_timesteps < total_timesteps:
+                segment = self.collect_rollouts(self.env, callback)
+                if segment is None:
+                    break
+                iteration += 1
+                self._after_rollout(total_timesteps)
+                self.train(segment)
+                if log_interval is not None and iteration % log_interval == 0:
+                    self.dump_logs(iteration)
+        else:
+            self._learn_overlapped(total_timesteps, callback, log_interval)
 
         callback.on_training_end()
         return self
+
+    def _after_rollout(self, total_timesteps: int) -> None:
+        self._update_current_progress_remaining(self.num_timesteps, total_timesteps)
+        self.behaviour_policy.record(self.logger)
+        self._record_tags()
+
+    def _learn_overlapped(self, total_timesteps: int, callback: BaseCallback, log_interval: Optional[int]) -> None:
+        """The learning loop with the updates of segment k in a second thread while segment k + 1 is collected."""
+        learner = copy.deepcopy(self.policy)
+        # The replay draws get their own generator: the rollouts in this thread may draw from the global one.
+        rng = np.random.default_rng(np.random.randint(2**31))
+        pending: Optional[Future] = None
+        iteration = 0
+
+        def finish_pending() -> None:
+            nonlocal pending
+            if pending is not None:
+                stats, pending = pending.result(), None
+                self._record_train(stats)
+                self._sync_policy(learner)
+
+        # The two threads split torch's intra-op threads (one each on two cores: measured faster than two each).
+        threads = th.get_num_threads()
+        th.set_num_threads(max(1, threads // 2))
+        with ThreadPoolExecutor(1, "acer-updates", initializer=th.set_num_threads, initargs=(max(1, threads // 2),)) as updates:
+            try:
+                while self.num_timesteps < total_timesteps:
+                    segment = self.collect_rollouts(self.env, callback)
+                    if segment is None:
+                        break
+                    iteration += 1
+                    self._after_rollout(total_timesteps)
+                    finish_pending()
+                    self._update_learning_rate(learner.optimizer)
+                    pending = updates.submit(self._train_on, segment, learner, rng)
+                    if log_interval is not None and iteration % log_interval == 0:
+                        self.dump_logs(iteration)
+            finally:  # also on an interruption: what was collected is learned and kept
+                finish_pending()
+                th.set_num_threads(threads)
 
     def _record_tags(self) -> None:
         if self.last_rollout_tags is None:
