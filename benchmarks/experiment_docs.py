@@ -52,10 +52,15 @@ def main(name: str, only_seeds: Optional[list[int]] = None) -> None:
     else:
         seeds_text = "Seeds per cell: " + "; ".join(f"{k} {', '.join(map(str, v))}" for k, v in per_cell.items())
     restricted = f" --seeds {','.join(map(str, only_seeds))}" if only_seeds else ""
+    how = "two runs at a time, one torch thread each"
+    overlapped = [c.cell for c in summaries if c.records[0]["config"].get("overlap")]
+    if overlapped:
+        how += (f" (the overlapped cells, {', '.join(overlapped)}: one run at a time, one torch thread in each of "
+                "its two threads)")
     body = (f"Commands: `dopt experiment run {name} --jobs 2 --seeds {','.join(map(str, seeds))}` then "
             f"`python benchmarks/experiment_docs.py {name}{restricted}` (grid: `benchmarks/experiments/{name}.yaml`). "
             f"{seeds_text}; {experiment.steps:,} env steps per run; {platform.machine()}, "
-            f"{os.cpu_count()} cores, two runs at a time, one torch thread each. ACER: "
+            f"{os.cpu_count()} cores, {how}. ACER: "
             f"{yaml.safe_dump(acer, default_flow_style=True, width=200).strip()}. {continued}\n\n"
             f"![{experiment.name}](images/{figure.name})\n\n{table_markdown(experiment, summaries)}\n\n"
             "Solid lines: training success (the last 50 episodes over all envs, priors included where they were "
