@@ -1,10 +1,11 @@
 """ACER: Sample Efficient Actor-Critic with Experience Replay (Wang et al. 2016), discrete actions."""
 
+import contextlib
 import copy
 import io
 import pathlib
 from concurrent.futures import Future, ThreadPoolExecutor
-from typing import Any, ClassVar, Optional, TypeVar, Union
+from typing import Any, Callable, ClassVar, Iterator, Optional, TypeVar, Union
 
 import numpy as np
 import torch as th
@@ -399,59 +400,55 @@ class ACER(BaseAlgorithm):
         callback.on_training_start(locals(), globals())
         assert self.env is not None
 
-        if not self.overlap:
+        with self._segment_trainer() as train_on:
             while self.num_timesteps < total_timesteps:
                 segment = self.collect_rollouts(self.env, callback)
                 if segment is None:
                     break
                 iteration += 1
-                self._after_rollout(total_timesteps)
-                self.train(segment)
+                self._update_current_progress_remaining(self.num_timesteps, total_timesteps)
+                self.behaviour_policy.record(self.logger)
+                self._record_tags()
+                train_on(segment)
                 if log_interval is not None and iteration % log_interval == 0:
                     self.dump_logs(iteration)
-        else:
-            self._learn_overlapped(total_timesteps, callback, log_interval)
 
         callback.on_training_end()
         return self
 
-    def _after_rollout(self, total_timesteps: int) -> None:
-        self._update_current_progress_remaining(self.num_timesteps, total_timesteps)
-        self.behaviour_policy.record(self.logger)
-        self._record_tags()
-
-    def _learn_overlapped(self, total_timesteps: int, callback: BaseCallback, log_interval: Optional[int]) -> None:
-        """The learning loop with the updates of segment k in a second thread while segment k + 1 is collected."""
+    @contextlib.contextmanager
+    def _segment_trainer(self) -> Iterator[Callable[[Segment], None]]:
+        """
+        What learns from each collected segment: :meth:`train`, or with ``overlap`` a function that hands the
+        segment to a second thread once the previous segment's updates are done and copied into ``self.policy``.
+        Leaving the context (also on an interruption) waits for the last updates: what was collected is learned.
+        """
+        if not self.overlap:
+            yield self.train
+            return
         learner = copy.deepcopy(self.policy)
         # The replay draws get their own generator: the rollouts in this thread may draw from the global one.
         rng = np.random.default_rng(np.random.randint(2**31))
-        pending: Optional[Future] = None
-        iteration = 0
+        pending: list[Future] = []
 
         def finish_pending() -> None:
-            nonlocal pending
-            if pending is not None:
-                stats, pending = pending.result(), None
-                self._record_train(stats)
+            if pending:
+                self._record_train(pending[0].result())  # still pending if this wait is interrupted
+                pending.clear()
                 self._sync_policy(learner)
+
+        def hand_over(segment: Segment) -> None:
+            finish_pending()
+            self._update_learning_rate(learner.optimizer)
+            pending.append(updates.submit(self._train_on, segment, learner, rng))
 
         # The two threads split torch's intra-op threads (one each on two cores: measured faster than two each).
         threads = th.get_num_threads()
         th.set_num_threads(max(1, threads // 2))
         with ThreadPoolExecutor(1, "acer-updates", initializer=th.set_num_threads, initargs=(max(1, threads // 2),)) as updates:
             try:
-                while self.num_timesteps < total_timesteps:
-                    segment = self.collect_rollouts(self.env, callback)
-                    if segment is None:
-                        break
-                    iteration += 1
-                    self._after_rollout(total_timesteps)
-                    finish_pending()
-                    self._update_learning_rate(learner.optimizer)
-                    pending = updates.submit(self._train_on, segment, learner, rng)
-                    if log_interval is not None and iteration % log_interval == 0:
-                        self.dump_logs(iteration)
-            finally:  # also on an interruption: what was collected is learned and kept
+                yield hand_over
+            finally:
                 finish_pending()
                 th.set_num_threads(threads)
 
