@@ -56,8 +56,8 @@ class RunConfig:
     :param eval_episodes: Episodes per evaluation
     :param vec_env: "dummy" (envs stepped in this process) or "subproc" (one process per env: their
         rendering runs in parallel on several cores)
-    :param overlap: ACER's updates in a second thread while the next segment is collected with the
-        weights of one segment earlier (faster on two cores; see ``ACER``'s ``overlap``)
+    :param overlap: ACER's replay updates in a second thread while the next segment is collected (faster
+        on two cores; see ``ACER``'s ``overlap``)
     """
 
     goal: str

@@ -143,14 +143,32 @@ def _optimizer_steps(model: ACER) -> set:
 def _update_threads() -> list:
     import threading
 
-    return [t for t in threading.enumerate() if t.name.startswith("acer-updates")]
+    return [t for t in threading.enumerate() if t.name.startswith("acer-replay")]
 
 
-def test_overlap_acts_one_segment_behind_and_ends_synchronised(tmp_path):
+def test_overlap_without_replay_is_the_sequential_loop():
+    """Only the replay updates run in the second thread: with none, every segment is collected with the same
+    weights as in the sequential loop."""
+    threads = th.get_num_threads()
+    th.set_num_threads(1)  # the same intra-op threads in both loops, for bit-equal sums
+    try:
+        weights = {}
+        for overlap in (False, True):
+            model = ACER("MlpPolicy", make_vec_env(ChainEnv, n_envs=2, seed=0), n_steps=5, seed=0, replay_ratio=0,
+                         overlap=overlap)
+            snapshots = Snapshots()
+            model.learn(100, callback=snapshots)
+            weights[overlap] = th.stack(snapshots.weights)
+        assert th.equal(weights[False], weights[True])
+    finally:
+        th.set_num_threads(threads)
+
+
+def test_overlap_replays_one_segment_behind_and_ends_synchronised(tmp_path):
     snapshots = {}
     for overlap in (False, True):
         env = make_vec_env(ChainEnv, n_envs=2, seed=0)
-        model = ACER("MlpPolicy", env, n_steps=5, seed=0, replay_start=10, overlap=overlap)
+        model = ACER("MlpPolicy", env, n_steps=5, seed=0, replay_start=20, overlap=overlap)
         threads = th.get_num_threads()
         snapshots[overlap] = Snapshots()
         model.learn(100, callback=snapshots[overlap])
@@ -159,8 +177,10 @@ def test_overlap_acts_one_segment_behind_and_ends_synchronised(tmp_path):
         # final weights and optimizer state.
         assert model.replay_buffer.n_stored == 10 and _optimizer_steps(model) == {model._n_updates}
     sync, overlapped = snapshots[False].weights, snapshots[True].weights
-    assert th.equal(sync[0], overlapped[0]) and th.equal(overlapped[0], overlapped[1])  # segment 1: no update done yet
-    assert not th.equal(sync[0], sync[1]) and not th.equal(overlapped[1], overlapped[2])
+    # Segment 1 follows segment 0's on-policy update in both loops (the replays start at 20 transitions,
+    # after segment 1); segment 2 follows segment 1's on-policy update but, overlapped, not its replays yet.
+    assert th.equal(sync[1], overlapped[1]) and not th.equal(sync[0], sync[1])
+    assert not th.equal(sync[2], overlapped[2])
     model.save(tmp_path / "model.zip")
     loaded = ACER.load(tmp_path / "model.zip")
     obs = np.eye(5, dtype=np.float32)

@@ -59,11 +59,12 @@ class ACER(BaseAlgorithm):
     :param delta: Bound of the trust region
     :param behaviour: The behaviour policy that chooses the actions during rollouts; sampling from the
         current policy if None. It is not saved with the model.
-    :param overlap: Update in a second thread while the next segment is collected: segment k is then
-        collected with the weights after the updates of segment k - 2 (one segment behind), which the
-        stored mu and the importance weights correct for. The two threads split torch's intra-op
-        threads; same number of updates per env step. ``self.policy`` (what callbacks, ``predict`` and ``save`` see) is the acting copy,
-        synchronised with the learner, optimizer state included, at every segment boundary.
+    :param overlap: Run the replay updates of segment k in a second thread while segment k + 1 is
+        collected (the on-policy update of segment k comes first, with all threads): the rollouts then
+        miss the latest segment's replay updates, which the stored mu and the importance weights correct
+        for; the number of updates is unchanged. ``self.policy`` (what callbacks, ``predict`` and ``save``
+        see) is the acting copy, synchronised with the learner, optimizer state included, after every
+        on-policy update and when ``learn`` ends or is interrupted.
     :param stats_window_size: Window size for the rollout logging, number of episodes to average
     :param tensorboard_log: The log location for tensorboard (if None, no logging)
     :param policy_kwargs: Additional arguments to be passed to the policy on creation
@@ -347,19 +348,23 @@ class ACER(BaseAlgorithm):
         :param segment: The segment just collected
         """
         self._update_learning_rate(self.policy.optimizer)
-        self._record_train(self._train_on(segment, self.policy))
+        stats = self._on_policy_update(segment, self.policy)
+        self._record_train({**stats, "replay_updates": self._replay_updates(self.policy)})
 
-    def _train_on(self, segment: Segment, policy: ACERPolicy, rng: Optional[np.random.Generator] = None) -> dict[str, float]:
-        """The updates of one segment on ``policy``; the replay draws from ``rng`` (numpy's global one if None)."""
+    def _on_policy_update(self, segment: Segment, policy: ACERPolicy) -> dict[str, float]:
         policy.set_training_mode(True)
         self.replay_buffer.add(segment)
-        stats = self._update(segment, policy)
-        n_replay = 0
-        if self.replay_ratio > 0 and self.replay_buffer.size() >= self.replay_start:
-            n_replay = int(np.random.poisson(self.replay_ratio) if rng is None else rng.poisson(self.replay_ratio))
-            for _ in range(n_replay):
-                self._update(self.replay_buffer.sample(rng), policy)
-        return {**stats, "replay_updates": n_replay}
+        return self._update(segment, policy)
+
+    def _replay_updates(self, policy: ACERPolicy, rng: Optional[np.random.Generator] = None) -> int:
+        """``Poisson(replay_ratio)`` updates on replayed segments once the buffer is warm, drawn from ``rng``
+        (numpy's global generator if None); returns their number."""
+        if self.replay_ratio <= 0 or self.replay_buffer.size() < self.replay_start:
+            return 0
+        n_replay = int(np.random.poisson(self.replay_ratio) if rng is None else rng.poisson(self.replay_ratio))
+        for _ in range(n_replay):
+            self._update(self.replay_buffer.sample(rng), policy)
+        return n_replay
 
     def _record_train(self, stats: dict[str, float]) -> None:
         for key, value in stats.items():
@@ -419,9 +424,10 @@ class ACER(BaseAlgorithm):
     @contextlib.contextmanager
     def _segment_trainer(self) -> Iterator[Callable[[Segment], None]]:
         """
-        What learns from each collected segment: :meth:`train`, or with ``overlap`` a function that hands the
-        segment to a second thread once the previous segment's updates are done and copied into ``self.policy``.
-        Leaving the context (also on an interruption) waits for the last updates: what was collected is learned.
+        What learns from each collected segment: :meth:`train`, or with ``overlap`` a function that does the
+        on-policy update, copies the learner into ``self.policy`` and hands the replay updates to a second
+        thread, where they run while the next segment is collected. Leaving the context (also on an
+        interruption) waits for the last replay updates: what was collected is learned.
         """
         if not self.overlap:
             yield self.train
@@ -431,25 +437,31 @@ class ACER(BaseAlgorithm):
         rng = np.random.default_rng(np.random.randint(2**31))
         pending: list[Future] = []
 
-        def finish_pending() -> None:
+        def finish_replays() -> None:
             if pending:
-                self._record_train(pending[0].result())  # still pending if this wait is interrupted
+                self.logger.record("train/replay_updates", pending[0].result())  # still pending if interrupted
                 pending.clear()
-                self._sync_policy(learner)
 
         def hand_over(segment: Segment) -> None:
-            finish_pending()
+            finish_replays()
             self._update_learning_rate(learner.optimizer)
-            pending.append(updates.submit(self._train_on, segment, learner, rng))
+            th.set_num_threads(threads)  # the other thread is idle here
+            self._record_train(self._on_policy_update(segment, learner))
+            th.set_num_threads(half)
+            self._sync_policy(learner)
+            pending.append(replays.submit(self._replay_updates, learner, rng))
 
-        # The two threads split torch's intra-op threads (one each on two cores: measured faster than two each).
+        # While both threads work they split torch's intra-op threads (one each on two cores: measured faster
+        # than two each).
         threads = th.get_num_threads()
-        th.set_num_threads(max(1, threads // 2))
-        with ThreadPoolExecutor(1, "acer-updates", initializer=th.set_num_threads, initargs=(max(1, threads // 2),)) as updates:
+        half = max(1, threads // 2)
+        th.set_num_threads(half)
+        with ThreadPoolExecutor(1, "acer-replay", initializer=th.set_num_threads, initargs=(half,)) as replays:
             try:
                 yield hand_over
             finally:
-                finish_pending()
+                finish_replays()
+                self._sync_policy(learner)
                 th.set_num_threads(threads)
 
     def _record_tags(self) -> None:
