@@ -57,7 +57,9 @@ def train_and_evaluate(run: Run, folder: Path, source: Optional[Path] = None) ->
     """
     import torch as th
 
-    th.set_num_threads(1)
+    # One torch thread per run, as several share a machine; an overlapped run works in two threads, and its
+    # on-policy update (while the other thread is idle) may use both.
+    th.set_num_threads(2 if run.config.overlap else 1)
     from sb3_disagree.training import evaluate_alone, train
 
     begun = _start_from(source, folder) if source is not None else 0
