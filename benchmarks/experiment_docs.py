@@ -55,8 +55,8 @@ def main(name: str, only_seeds: Optional[list[int]] = None) -> None:
     how = "two runs at a time, one torch thread each"
     overlapped = [c.cell for c in summaries if c.records[0]["config"].get("overlap")]
     if overlapped:
-        how += (f" (the overlapped cells, {', '.join(overlapped)}: one run at a time, one torch thread in each of "
-                "its two threads)")
+        how += (f" (the overlapped cells, {', '.join(overlapped)}: one run at a time, two torch threads for the on-policy "
+                "update and one in each of its two threads while the replay updates overlap the rollouts)")
     body = (f"Commands: `dopt experiment run {name} --jobs 2 --seeds {','.join(map(str, seeds))}` then "
             f"`python benchmarks/experiment_docs.py {name}{restricted}` (grid: `benchmarks/experiments/{name}.yaml`). "
             f"{seeds_text}; {experiment.steps:,} env steps per run; {platform.machine()}, "
