@@ -36,7 +36,7 @@ def main() -> None:
     th.set_num_threads(args.threads)
     times: dict[str, list[float]] = defaultdict(list)
     for name, attr in [("rollout", "collect_rollouts"), ("on-policy update", "_on_policy_update"),
-                       ("replay updates", "_replay_updates"), ("copy to the acting policy", "_sync_policy")]:
+                       ("replay updates", "_replay"), ("copy to the acting policy", "_sync_policy")]:
         setattr(ACER, attr, timed(times, name, getattr(ACER, attr)))
     rate = acer_rate("disagreement", args.steps, args.warm, "dummy", overlap=True)
     segments = args.steps // 80  # 4 envs x 20 steps: the segments after the warm-up

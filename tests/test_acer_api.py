@@ -207,3 +207,31 @@ def test_overlap_interrupted_learns_what_was_collected():
     assert not _update_threads()
     model.learn(60, reset_num_timesteps=False)  # and continues
     assert model.replay_buffer.n_stored == 10
+
+
+class CountingACER(ACER):
+    """Records the Poisson draws and the replay batches handed to the worker."""
+
+    def _replay_count(self, rng):
+        n = super()._replay_count(rng)
+        self.draws = [*getattr(self, "draws", []), n]
+        return n
+
+    def _replay(self, policy, n_replay, rng=None):
+        self.batches = [*getattr(self, "batches", []), n_replay]
+        return super()._replay(policy, n_replay, rng)
+
+
+def test_overlap_caps_the_replays_per_segment_and_carries_the_rest():
+    model = CountingACER("MlpPolicy", make_vec_env(ChainEnv, n_envs=2, seed=0), n_steps=5, seed=0, replay_start=10,
+                         replay_ratio=4, overlap=True)
+    model.learn(600)
+    cap = 5  # ceil(replay_ratio) + 1
+    segments = 60
+    assert len(model.draws) == segments and max(model.draws) > cap  # the carry is exercised
+    # One batch per segment, then what is still owed when learn ends.
+    assert len(model.batches) == segments + 1 and max(model.batches[:-1]) <= cap
+    # Every update that was drawn is done, none twice, each batch as soon as the cap allows.
+    assert sum(model.batches) == sum(model.draws) and model._n_updates == segments + sum(model.draws)
+    owed = np.cumsum(model.draws) - np.cumsum(model.batches[:-1])
+    assert np.array_equal(model.batches[:-1], np.minimum(owed + model.batches[:-1], cap))

@@ -62,7 +62,8 @@ class ACER(BaseAlgorithm):
     :param overlap: Run the replay updates of segment k in a second thread while segment k + 1 is
         collected (the on-policy update of segment k comes first, with all threads): the rollouts then
         miss the latest segment's replay updates, which the stored mu and the importance weights correct
-        for; the number of updates is unchanged. ``self.policy`` (what callbacks, ``predict`` and ``save``
+        for; the number of updates is unchanged, at most ``ceil(replay_ratio) + 1`` of them per segment
+        (the rest of a large Poisson draw is carried to the next). ``self.policy`` (what callbacks, ``predict`` and ``save``
         see) is the acting copy, synchronised with the learner, optimizer state included, after every
         on-policy update and when ``learn`` ends or is interrupted.
     :param stats_window_size: Window size for the rollout logging, number of episodes to average
@@ -356,12 +357,19 @@ class ACER(BaseAlgorithm):
         self.replay_buffer.add(segment)
         return self._update(segment, policy)
 
-    def _replay_updates(self, policy: ACERPolicy, rng: Optional[np.random.Generator] = None) -> int:
-        """``Poisson(replay_ratio)`` updates on replayed segments once the buffer is warm, drawn from ``rng``
-        (numpy's global generator if None); returns their number."""
+    def _replay_updates(self, policy: ACERPolicy) -> int:
+        """``Poisson(replay_ratio)`` updates on replayed segments once the buffer is warm; returns their number."""
+        return self._replay(policy, self._replay_count(None))
+
+    def _replay_count(self, rng: Optional[np.random.Generator]) -> int:
+        """How many replay updates this segment earns: ``Poisson(replay_ratio)`` once the buffer is warm, drawn
+        from ``rng`` (numpy's global generator if None)."""
         if self.replay_ratio <= 0 or self.replay_buffer.size() < self.replay_start:
             return 0
-        n_replay = int(np.random.poisson(self.replay_ratio) if rng is None else rng.poisson(self.replay_ratio))
+        return int(np.random.poisson(self.replay_ratio) if rng is None else rng.poisson(self.replay_ratio))
+
+    def _replay(self, policy: ACERPolicy, n_replay: int, rng: Optional[np.random.Generator] = None) -> int:
+        """``n_replay`` updates of ``policy`` on segments drawn from the replay buffer with ``rng``."""
         for _ in range(n_replay):
             self._update(self.replay_buffer.sample(rng), policy)
         return n_replay
@@ -433,9 +441,13 @@ class ACER(BaseAlgorithm):
             yield self.train
             return
         learner = copy.deepcopy(self.policy)
-        # The replay draws get their own generator: the rollouts in this thread may draw from the global one.
-        rng = np.random.default_rng(np.random.randint(2**31))
+        # The replay draws get their own generators (counts here, segments in the worker): the rollouts in this
+        # thread may draw from the global one.
+        seeds = np.random.randint(2**31, size=2)
+        counts, samples = np.random.default_rng(seeds[0]), np.random.default_rng(seeds[1])
+        cap = int(np.ceil(self.replay_ratio)) + 1
         pending: list[Future] = []
+        backlog = 0
 
         def finish_replays() -> None:
             if pending:
@@ -443,13 +455,19 @@ class ACER(BaseAlgorithm):
                 pending.clear()
 
         def hand_over(segment: Segment) -> None:
+            nonlocal backlog
             finish_replays()
             self._update_learning_rate(learner.optimizer)
             th.set_num_threads(threads)  # the other thread is idle here
             self._record_train(self._on_policy_update(segment, learner))
             th.set_num_threads(half)
             self._sync_policy(learner)
-            pending.append(replays.submit(self._replay_updates, learner, rng))
+            # At most `cap` replay updates per segment, the rest carried to the next: a large Poisson draw
+            # would otherwise keep the rollouts waiting while a small one leaves the worker idle.
+            backlog += self._replay_count(counts)
+            n_replay = min(backlog, cap)
+            backlog -= n_replay
+            pending.append(replays.submit(self._replay, learner, n_replay, samples))
 
         # While both threads work they split torch's intra-op threads (one each on two cores: measured faster
         # than two each).
@@ -461,8 +479,9 @@ class ACER(BaseAlgorithm):
                 yield hand_over
             finally:
                 finish_replays()
-                self._sync_policy(learner)
                 th.set_num_threads(threads)
+                self._replay(learner, backlog, samples)  # what was earned is learned
+                self._sync_policy(learner)
 
     def _record_tags(self) -> None:
         if self.last_rollout_tags is None:
