@@ -1,5 +1,5 @@
 """
-Where an overlapped `dopt train --overlap` run spends a segment: the rollout (main thread), the on-policy
+Where an overlapped `dopt train` run (`--overlap`, the default) spends a segment: the rollout (main thread), the on-policy
 update and the replay updates (second thread), timed per segment after the warm-up, with the run's env
 steps/s. Printed, not written into the docs.
 

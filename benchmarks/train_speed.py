@@ -1,6 +1,6 @@
 """
 End-to-end training throughput on the apartment RGB: `dopt train` with disagreement options (and from
-scratch, each with and without ``--overlap``) against SB3's PPO CnnPolicy on the same env, one after
+scratch, each with ``--overlap``, the default, and the sequential loop of ``--no-overlap``) against SB3's PPO CnnPolicy on the same env, one after
 another in the same process, each for the same number of env steps after its own warm-up; with
 ``--repeats N`` the rows are measured N times, interleaved, and the table gives the median and range.
 Written into docs/benchmarks.md.
@@ -73,10 +73,10 @@ def main() -> None:
     args = parser.parse_args()
     th.set_num_threads(args.threads)
     columns = {
-        "dopt train, disagreement": lambda v: acer_rate("disagreement", args.steps, args.warm, v),
-        "dopt train --overlap, disagreement": lambda v: acer_rate("disagreement", args.steps, args.warm, v, True),
-        "dopt train, scratch": lambda v: acer_rate("scratch", args.steps, args.warm, v),
-        "dopt train --overlap, scratch": lambda v: acer_rate("scratch", args.steps, args.warm, v, True),
+        "dopt train --no-overlap, disagreement": lambda v: acer_rate("disagreement", args.steps, args.warm, v),
+        "dopt train (--overlap), disagreement": lambda v: acer_rate("disagreement", args.steps, args.warm, v, True),
+        "dopt train --no-overlap, scratch": lambda v: acer_rate("scratch", args.steps, args.warm, v),
+        "dopt train (--overlap), scratch": lambda v: acer_rate("scratch", args.steps, args.warm, v, True),
         "SB3 PPO CnnPolicy": lambda v: ppo_rate(args.steps, args.warm, v),
     }
     rates: dict[tuple[str, str], list[float]] = {}

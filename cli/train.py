@@ -63,8 +63,9 @@ def train(
     eval_episodes: int = typer.Option(20, "--eval-episodes", help="Episodes per evaluation."),
     vec_env: str = typer.Option("dummy", "--vec-env", help="dummy (envs in this process) or subproc (one process "
                                 "per env)."),
-    overlap: bool = typer.Option(False, "--overlap/--no-overlap", help="Replay updates in a second thread while "
-                                 "the next segment is collected (faster on two cores)."),
+    overlap: bool = typer.Option(True, "--overlap/--no-overlap", help="Replay updates in a second thread while "
+                                 "the next segment is collected (faster on two cores); --no-overlap for the "
+                                 "sequential loop the experiments use."),
     out: Path = typer.Option(Path("runs"), "--out", help="Root folder of the runs."),
     resume: Optional[Path] = typer.Option(None, "--resume", help="A run folder to continue."),
 ) -> None:

@@ -57,7 +57,8 @@ class RunConfig:
     :param vec_env: "dummy" (envs stepped in this process) or "subproc" (one process per env: their
         rendering runs in parallel on several cores)
     :param overlap: ACER's replay updates in a second thread while the next segment is collected (faster
-        on two cores; see ``ACER``'s ``overlap``)
+        on two cores; see ``ACER``'s ``overlap``). ``dopt train`` turns it on; off here, so that the
+        experiments keep the sequential loop their figures were made with unless a cell asks for it
     """
 
     goal: str

@@ -72,10 +72,20 @@ def test_subprocess_envs_train_like_in_process_ones(zoo, tmp_path):
     assert len(list((run / "monitor").glob("*.monitor.csv"))) == 2
 
 
+def test_overlap_is_the_default_and_can_be_turned_off(zoo, tmp_path):
+    for flag, overlap in [((), True), (("--no-overlap",), False)]:
+        out = tmp_path / str(overlap)
+        result = runner.invoke(app, _train_args(zoo, out, *flag))
+        assert result.exit_code == 0, result.output
+        run = out / "sb3_disagree__ApartmentState-v0" / "bathtub" / "disagreement-0"
+        assert yaml.safe_load((run / "config.yaml").read_text())["overlap"] is overlap
+        assert ACER.load(run / "model.zip").overlap is overlap
+
+
 def test_overlap_trains_evaluates_and_resumes(zoo, tmp_path):
     import numpy as np
 
-    result = runner.invoke(app, _train_args(zoo, tmp_path, "--overlap", "--eval-every", "200", "--eval-episodes", "2"))
+    result = runner.invoke(app, _train_args(zoo, tmp_path, "--eval-every", "200", "--eval-episodes", "2"))
     assert result.exit_code == 0, result.output
     run = tmp_path / "sb3_disagree__ApartmentState-v0" / "bathtub" / "disagreement-0"
     assert yaml.safe_load((run / "config.yaml").read_text())["overlap"] is True
@@ -123,6 +133,7 @@ def test_interrupt_saves_and_resume_continues_the_step_count(zoo, tmp_path):
     assert result.exit_code == 0, result.output
     cfg = yaml.safe_load((run / "config.yaml").read_text())
     assert cfg["finished"] and cfg["num_timesteps"] >= 600
+    assert cfg["overlap"] is False  # the saved run's loop, whatever the command line's default
     assert ACER.load(run / "model.zip").num_timesteps == cfg["num_timesteps"]
     assert not (run / "replay_buffer.pkl").exists()
     # A finished run continues to a larger budget on request.
