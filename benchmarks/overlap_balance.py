@@ -1,7 +1,7 @@
 """
-Where an overlapped `dopt train` run (`--overlap`, the default) spends a segment: the rollout (main thread), the on-policy
-update and the replay updates (second thread), timed per segment after the warm-up, with the run's env
-steps/s. Printed, not written into the docs.
+Where an overlapped `dopt train` run (`--overlap`, the default) spends a segment: the rollout (main
+thread), the on-policy update and the replay updates (second thread), timed per segment after the
+warm-up, with the run's env steps/s. Printed, not written into the docs.
 
     python benchmarks/overlap_balance.py [--steps 4000] [--warm 2400] [--threads 2]
 """

@@ -1,8 +1,9 @@
 """
 End-to-end training throughput on the apartment RGB: `dopt train` with disagreement options (and from
-scratch, each with ``--overlap``, the default, and the sequential loop of ``--no-overlap``) against SB3's PPO CnnPolicy on the same env, one after
-another in the same process, each for the same number of env steps after its own warm-up; with
-``--repeats N`` the rows are measured N times, interleaved, and the table gives the median and range.
+scratch), each with ``--overlap`` (the default) and with the sequential loop of ``--no-overlap``, against
+SB3's PPO CnnPolicy on the same env, one after another in the same process, each for the same number
+of env steps after its own warm-up; with ``--repeats N`` the rows are measured N times, interleaved, and
+the table gives the median and range.
 Written into docs/benchmarks.md.
 
     python benchmarks/train_speed.py --steps 6000 [--threads 2] [--vec-env dummy subproc] [--repeats 3] [--write]

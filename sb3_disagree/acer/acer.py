@@ -63,9 +63,9 @@ class ACER(BaseAlgorithm):
         collected (the on-policy update of segment k comes first, with all threads): the rollouts then
         miss the latest segment's replay updates, which the stored mu and the importance weights correct
         for; the number of updates is unchanged, at most ``ceil(replay_ratio) + 1`` of them per segment
-        (the rest of a large Poisson draw is carried to the next). ``self.policy`` (what callbacks, ``predict`` and ``save``
-        see) is the acting copy, synchronised with the learner, optimizer state included, after every
-        on-policy update and when ``learn`` ends or is interrupted.
+        (the rest of a large Poisson draw is carried to the next). ``self.policy`` (what callbacks,
+        ``predict`` and ``save`` see) is the acting copy, synchronised with the learner, optimizer state
+        included, after every on-policy update and when ``learn`` ends or is interrupted.
     :param stats_window_size: Window size for the rollout logging, number of episodes to average
     :param tensorboard_log: The log location for tensorboard (if None, no logging)
     :param policy_kwargs: Additional arguments to be passed to the policy on creation
@@ -350,16 +350,13 @@ class ACER(BaseAlgorithm):
         """
         self._update_learning_rate(self.policy.optimizer)
         stats = self._on_policy_update(segment, self.policy)
-        self._record_train({**stats, "replay_updates": self._replay_updates(self.policy)})
+        n_replay = self._replay(self.policy, self._replay_count(None))
+        self._record_train({**stats, "replay_updates": n_replay})
 
     def _on_policy_update(self, segment: Segment, policy: ACERPolicy) -> dict[str, float]:
         policy.set_training_mode(True)
         self.replay_buffer.add(segment)
         return self._update(segment, policy)
-
-    def _replay_updates(self, policy: ACERPolicy) -> int:
-        """``Poisson(replay_ratio)`` updates on replayed segments once the buffer is warm; returns their number."""
-        return self._replay(policy, self._replay_count(None))
 
     def _replay_count(self, rng: Optional[np.random.Generator]) -> int:
         """How many replay updates this segment earns: ``Poisson(replay_ratio)`` once the buffer is warm, drawn
