@@ -114,27 +114,25 @@ def remove(goal: str, env: str = ENV_OPT, zoo: Optional[Path] = ZOO_OPT) -> None
 def eval_prior(
     goal: str,
     episodes: int = typer.Option(100, "--episodes"),
-    deterministic: bool = typer.Option(False, "--deterministic/--stochastic",
-                                       help="Greedy actions, or sampled as the method follows priors."),
+    deterministic: Optional[bool] = typer.Option(None, "--deterministic/--stochastic", help="Only greedy or only "
+                                                 "sampled actions [default: both, side by side]."),
     seed: int = typer.Option(CARD_SEED, "--seed", help="Seed of the first env; the card's episodes start at 10000."),
-    record: bool = typer.Option(False, "--record", help="Write this evaluation on the prior's card (sampled actions only)."),
+    record: bool = typer.Option(False, "--record", help="Write the evaluations on the prior's card."),
     env: str = ENV_OPT,
     zoo: Optional[Path] = ZOO_OPT,
 ) -> None:
-    """Evaluate a prior alone from the environment's start distribution."""
+    """Evaluate a prior alone from the environment's start distribution, greedy and sampled."""
     with clean_errors():
-        if record and deterministic:
-            raise ValueError("--record keeps the card's evaluation as the method uses priors: with sampled actions; "
-                             "drop --deterministic")
         z = _zoo(zoo)
         entry = z.get(goal, env)
-        result = _evaluate(z, entry, episodes, deterministic, seed)
-        console.print(f"{goal}: success {result.success_rate:.2f}, mean length {result.mean_length:.1f}, "
-                      f"mean return {result.mean_return:.2f} over {episodes} episodes "
-                      f"({'greedy' if deterministic else 'sampled'} actions)")
-        if record:
-            z.record_evaluation(entry, {**result.as_dict(), "seed": seed})
-            console.print(f"recorded on {entry.path / 'card.json'}")
+        for greedy in (True, False) if deterministic is None else (deterministic,):
+            result = _evaluate(z, entry, episodes, greedy, seed)
+            console.print(f"{goal}: success {result.success_rate:.2f}, mean length {result.mean_length:.1f}, "
+                          f"mean return {result.mean_return:.2f} over {episodes} episodes "
+                          f"({'greedy' if greedy else 'sampled'} actions)")
+            if record:
+                entry = z.record_evaluation(entry, {**result.as_dict(), "seed": seed})
+                console.print(f"recorded on {entry.path / 'card.json'}")
 
 
 @app.command()
@@ -201,11 +199,12 @@ def _evaluate(z, entry, episodes: int, deterministic: bool, seed: int):
 
 
 def _evaluate_into_card(z, entry, episodes: int) -> None:
-    """Evaluate a new entry with sampled actions (as the method follows priors) and record it on its card."""
-    result = _evaluate(z, entry, episodes, deterministic=False, seed=CARD_SEED)
-    z.record_evaluation(entry, {**result.as_dict(), "seed": CARD_SEED})
-    console.print(f"{entry.goal}: success {result.success_rate:.2f} over {episodes} episodes, "
-                  f"mean length {result.mean_length:.1f}")
+    """Evaluate a new entry with greedy and sampled actions and record both on its card."""
+    for greedy in (True, False):
+        result = _evaluate(z, entry, episodes, deterministic=greedy, seed=CARD_SEED)
+        entry = z.record_evaluation(entry, {**result.as_dict(), "seed": CARD_SEED})
+        console.print(f"{entry.goal}: success {result.success_rate:.2f} over {episodes} episodes "
+                      f"({'greedy' if greedy else 'sampled'}), mean length {result.mean_length:.1f}")
 
 
 def similarity(

@@ -106,7 +106,8 @@ def train(
 def eval_run(
     run_or_model: Path = typer.Argument(..., help="A run folder or a model.zip."),
     episodes: int = typer.Option(100, "--episodes"),
-    deterministic: bool = typer.Option(True, "--deterministic/--stochastic"),
+    deterministic: Optional[bool] = typer.Option(None, "--deterministic/--stochastic", help="Only greedy or only "
+                                                 "sampled actions [default: both, side by side]."),
     seed: int = typer.Option(20_000, "--seed"),
     trajectory: Optional[Path] = typer.Option(None, "--trajectory", help="Draw the run's recorded episodes (PNG)."),
     episode: int = typer.Option(-1, "--episode", help="Which recorded episode to draw (-1: the last)."),
@@ -128,10 +129,11 @@ def eval_run(
             raise FileNotFoundError(f"{cfg_path} is missing: it names the environment and goal to evaluate in")
         cfg = yaml.safe_load(cfg_path.read_text())
         model = ACER.load(model_path, device="cpu")
-        result = evaluate_alone(model, cfg, episodes, deterministic, seed)
-        console.print(f"{cfg['goal']}: success {result.success_rate:.2f}, mean length {result.mean_length:.1f}, "
-                      f"mean return {result.mean_return:.2f} over {episodes} episodes "
-                      f"({'greedy' if deterministic else 'sampled'} actions, no priors)")
+        for greedy in (True, False) if deterministic is None else (deterministic,):
+            result = evaluate_alone(model, cfg, episodes, greedy, seed)
+            console.print(f"{cfg['goal']}: success {result.success_rate:.2f}, mean length {result.mean_length:.1f}, "
+                          f"mean return {result.mean_return:.2f} over {episodes} episodes "
+                          f"({'greedy' if greedy else 'sampled'} actions, no priors)")
         if trajectory is not None:
             draw_recorded(run_dir, cfg, trajectory, episode)
 

@@ -24,11 +24,16 @@ class BehaviourStep(NamedTuple):
     :param actions: The action to execute in each env, shape (n_envs,)
     :param mu: The behaviour distribution each action was drawn from, shape (n_envs, n_actions)
     :param tags: Optional per-env labels of the step (e.g. "prior" / "explore"), shape (n_envs,)
+    :param teacher: Optional distribution the new policy may be distilled toward at this step (the priors'
+        mixture), shape (n_envs, n_actions); stored with the segment for ACER's ``distill_coef``
+    :param followed: Optional 1.0 where the teacher chose this step's action, shape (n_envs,)
     """
 
     actions: Union[np.ndarray, th.Tensor]
     mu: Union[np.ndarray, th.Tensor]
     tags: Optional[np.ndarray] = None
+    teacher: Optional[Union[np.ndarray, th.Tensor]] = None
+    followed: Optional[Union[np.ndarray, th.Tensor]] = None
 
 
 class BehaviourPolicy(ABC):

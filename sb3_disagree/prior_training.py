@@ -8,7 +8,7 @@ its current state (the apartment does); DAgger needs nothing else.
 
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any, Optional
 
 import numpy as np
@@ -34,6 +34,7 @@ class Evaluation:
     mean_return: float
     episodes: int
     deterministic: bool
+    per_episode: dict[str, list] = field(default_factory=dict)  # successes, returns, lengths; not in as_dict
 
     def as_dict(self) -> dict[str, Any]:
         return {"success_rate": self.success_rate, "mean_length": self.mean_length, "mean_return": self.mean_return,
@@ -50,33 +51,29 @@ def make_env(env_id: str, goal: str, env_kwargs: Optional[dict] = None, n_envs: 
 def evaluate(model: BaseAlgorithm, env: VecEnv, episodes: int = 100, deterministic: bool = True,
              progress: Optional[Callable[[int], None]] = None) -> Evaluation:
     """
-    Run the policy alone for a number of episodes from the env's start distribution.
+    Run the policy alone for a number of episodes from the env's start distribution, with SB3's own
+    ``evaluate_policy`` (which carries a policy's state, such as a frame stack, between steps).
 
     :param model: The policy
-    :param env: The environment (a VecEnv; its envs report ``is_success``)
+    :param env: The environment (a VecEnv of Monitor-wrapped envs that report ``is_success``)
     :param episodes: Number of episodes
     :param deterministic: Greedy actions if True, sampled otherwise
     :param progress: Called with the number of finished episodes
     """
-    obs = env.reset()
-    lengths, returns, successes = [], [], []
-    cur_len = np.zeros(env.num_envs, dtype=int)
-    cur_ret = np.zeros(env.num_envs)
-    while len(lengths) < episodes:
-        actions, _ = model.predict(obs, deterministic=deterministic)
-        obs, rewards, dones, infos = env.step(actions)
-        cur_len += 1
-        cur_ret += rewards
-        for i in np.flatnonzero(dones):
-            if len(lengths) < episodes:
-                lengths.append(int(cur_len[i]))
-                returns.append(float(cur_ret[i]))
-                successes.append(bool(infos[i].get("is_success", False)))
-                if progress:
-                    progress(len(lengths))
-            cur_len[i], cur_ret[i] = 0, 0.0
-    return Evaluation(float(np.mean(successes)), float(np.mean(lengths)), float(np.mean(returns)), episodes,
-                      deterministic)
+    from stable_baselines3.common.evaluation import evaluate_policy
+
+    successes: list[bool] = []
+
+    def on_step(local: dict[str, Any], _: dict[str, Any]) -> None:
+        if local["done"]:
+            successes.append(bool(local["info"].get("is_success", False)))
+            if progress:
+                progress(len(successes))
+
+    returns, lengths = evaluate_policy(model, env, n_eval_episodes=episodes, deterministic=deterministic,
+                                       return_episode_rewards=True, callback=on_step)
+    return Evaluation(float(np.mean(successes)), float(np.mean(lengths)), float(np.mean(returns)), len(lengths),
+                      deterministic, dict(successes=successes, returns=list(returns), lengths=list(lengths)))
 
 
 def policy_name(env: VecEnv) -> str:

@@ -17,7 +17,7 @@ from typing import Any, Optional
 
 import numpy as np
 import yaml
-from stable_baselines3.common.callbacks import BaseCallback, CallbackList, EvalCallback
+from stable_baselines3.common.callbacks import BaseCallback, CallbackList
 from stable_baselines3.common.env_util import make_vec_env
 from stable_baselines3.common.logger import CSVOutputFormat, Logger, make_output_format
 
@@ -25,6 +25,9 @@ from sb3_disagree.acer import ACER
 from sb3_disagree.options import MODES, PriorSet, make_options
 
 DEFAULT_ENV = "sb3_disagree/Apartment-v0"
+# Env seeds of the evaluations, offsets from the run's seed: the training envs use seed .. seed + n_envs - 1.
+EVAL_SEED_OFFSET = 10_000  # the periodic evaluations along a run
+FINAL_EVAL_SEED_OFFSET = 20_000  # the evaluation after a run
 # ACER on the apartment: images through NatureCNN; a buffer of 50k frames is 0.7 GB of uint8. Rewards scaled
 # by 0.1 (Q in units of the +10 goal / 10): at scale 1 the policy's entropy collapsed by 20k steps and the
 # new policy alone fell back to ~0 success; at 0.1 it trains stably (docs/results.md, "Choosing ACER's scale").
@@ -59,6 +62,8 @@ class RunConfig:
     :param overlap: ACER's replay updates in a second thread while the next segment is collected (faster
         on two cores; see ``ACER``'s ``overlap``). ``dopt train`` turns it on; off here, so that the
         experiments keep the sequential loop their figures were made with unless a cell asks for it
+    :param frame_stack: The new policy sees its last this many observations (its memory; 1: the current one);
+        the priors keep their single observation
     """
 
     goal: str
@@ -79,6 +84,7 @@ class RunConfig:
     eval_episodes: int = 20
     vec_env: str = "dummy"
     overlap: bool = False
+    frame_stack: int = 1
 
     def validate(self) -> None:
         if self.mode not in MODES:
@@ -91,6 +97,8 @@ class RunConfig:
             raise ValueError("--steps and --n-envs must be positive")
         if self.vec_env not in ("dummy", "subproc"):
             raise ValueError(f"--vec-env must be dummy or subproc, got {self.vec_env!r}")
+        if self.frame_stack < 1:
+            raise ValueError(f"--frame-stack must be >= 1, got {self.frame_stack}")
         if self.eval_every < 0 or self.eval_episodes < 1:
             raise ValueError("--eval-every must be >= 0 and --eval-episodes positive")
 
@@ -200,27 +208,56 @@ def run_logger(run_dir: Path, append: bool) -> Logger:
     return Logger(str(run_dir), [csv, make_output_format("tensorboard", str(run_dir))])
 
 
-def evaluation_callback(config: RunConfig, run_dir: Path, append: bool = False) -> EvalCallback:
-    """The new policy alone on its own envs (other seeds), sampled actions, every ``eval_every`` steps; with
-    ``append``, the evaluations already in ``run_dir/evaluations.npz`` are kept ahead of the new ones."""
-    from stable_baselines3.common.preprocessing import is_image_space, is_image_space_channels_first
-    from stable_baselines3.common.vec_env import VecTransposeImage
+class EvaluateAlone(BaseCallback):
+    """
+    Every ``every`` env steps, the new policy alone (no priors) on envs of its own seeds, greedy and sampled,
+    with SB3's ``evaluate_policy``: logged as ``eval/success_rate_greedy`` and ``eval/success_rate`` (sampled)
+    and kept in ``evaluations.npz`` (``timesteps``; per evaluation and episode ``successes`` sampled,
+    ``successes_greedy``, and the sampled episodes' ``results`` and ``ep_lengths``, as SB3's ``EvalCallback``). With ``append`` the evaluations already in the file stay ahead of the new ones.
 
-    eval_env = build_env(config, None, n_envs=min(config.n_envs, 4), seed=config.seed + 10_000, vec_env="dummy")
-    space = eval_env.observation_space
-    if is_image_space(space) and not is_image_space_channels_first(space):
-        eval_env = VecTransposeImage(eval_env)  # as ACER wraps the training env
-    callback = EvalCallback(eval_env, n_eval_episodes=config.eval_episodes,
-                            eval_freq=max(config.eval_every // config.n_envs, 1), log_path=str(run_dir),
-                            deterministic=False, verbose=0)
-    earlier = run_dir / "evaluations.npz"
-    if append and earlier.exists():
-        with np.load(earlier) as data:  # EvalCallback rewrites the file from these lists at each evaluation
-            callback.evaluations_timesteps = data["timesteps"].tolist()
-            callback.evaluations_results = list(data["results"])
-            callback.evaluations_length = list(data["ep_lengths"])
-            callback.evaluations_successes = list(data["successes"]) if "successes" in data else []
-    return callback
+    :param config: The run's configuration: env, goal, seed, episodes per evaluation
+    :param run_dir: Where ``evaluations.npz`` goes
+    :param append: Keep the evaluations of the run this one resumes
+    """
+
+    KEYS = ("timesteps", "successes", "successes_greedy", "results", "ep_lengths")
+
+    def __init__(self, config: RunConfig, run_dir: Path, append: bool = False) -> None:
+        super().__init__()
+        self.config, self.path = config, run_dir / "evaluations.npz"
+        self.every = max(config.eval_every // config.n_envs, 1)  # in calls, one per vectorised step
+        self.history: dict[str, list] = {key: [] for key in self.KEYS}
+        if append and self.path.exists():
+            with np.load(self.path) as data:
+                self.history = {key: list(data[key]) for key in self.KEYS if key in data}
+                self.history.setdefault("successes_greedy", [])
+        self.env = None
+
+    def _on_step(self) -> bool:
+        if self.n_calls % self.every:
+            return True
+        from sb3_disagree.prior_training import evaluate
+
+        if self.env is None:
+            self.env = build_env(self.config, None, n_envs=min(self.config.n_envs, 4),
+                                 seed=self.config.seed + EVAL_SEED_OFFSET, vec_env="dummy")
+        sampled = evaluate(self.model, self.env, self.config.eval_episodes, deterministic=False)
+        greedy = evaluate(self.model, self.env, self.config.eval_episodes, deterministic=True)
+        per = sampled.per_episode
+        for key, value in zip(self.KEYS, (self.num_timesteps, per["successes"], greedy.per_episode["successes"],
+                                          per["returns"], per["lengths"])):
+            self.history[key].append(value)
+        np.savez(self.path, **{key: np.asarray(values) for key, values in self.history.items()})
+        self.logger.record("eval/success_rate", sampled.success_rate)
+        self.logger.record("eval/success_rate_greedy", greedy.success_rate)
+        self.logger.record("eval/mean_ep_length", sampled.mean_length)
+        self.logger.record("time/total_timesteps", self.num_timesteps, exclude="tensorboard")
+        self.logger.dump(self.num_timesteps)  # as SB3's EvalCallback: the evaluation gets its own row
+        return True
+
+    def _on_training_end(self) -> None:
+        if self.env is not None:
+            self.env.close()
 
 
 def train(config: RunConfig, out: Path = Path("runs"), resume: Optional[Path] = None,
@@ -264,13 +301,16 @@ def train(config: RunConfig, out: Path = Path("runs"), resume: Optional[Path] = 
         remaining = max(config.steps - model.num_timesteps, 0)
     else:
         policy = "CnnPolicy" if len(env.observation_space.shape) == 3 else "MlpPolicy"
-        model = ACER(policy, env, seed=config.seed, behaviour=behaviour, overlap=config.overlap, **config.acer_kwargs)
+        acer_kwargs = dict(config.acer_kwargs)
+        if config.frame_stack > 1:
+            acer_kwargs["policy_kwargs"] = {**acer_kwargs.get("policy_kwargs", {}), "frame_stack": config.frame_stack}
+        model = ACER(policy, env, seed=config.seed, behaviour=behaviour, overlap=config.overlap, **acer_kwargs)
         remaining = config.steps
         (run_dir / "config.yaml").write_text(yaml.safe_dump(saved_config, sort_keys=False))
     model.set_logger(run_logger(run_dir, append=resume is not None))
     own = [RecordTrajectories(run_dir / "trajectories.jsonl")]
     if config.eval_every:
-        own.append(evaluation_callback(config, run_dir, append=resume is not None))
+        own.append(EvaluateAlone(config, run_dir, append=resume is not None))
     finished = True
     try:
         model.learn(remaining, callback=CallbackList([*own, *(callbacks or [])]), log_interval=10,

@@ -82,7 +82,8 @@ class Card:
     :param action_space: JSON form of the action space
     :param sb3_class: Import path of the algorithm class that loads the model
     :param training: How it was trained: method, steps, seed, ...
-    :param evaluation: success_rate, episodes, mean_length
+    :param evaluation: success_rate, episodes, mean_length with sampled actions (as the method follows priors)
+    :param evaluation_greedy: The same with greedy actions (SB3's ``evaluate_policy`` default)
     :param sha256: Of model.zip
     :param created: ISO time of creation
     :param command: The command that made it
@@ -96,6 +97,7 @@ class Card:
     sb3_class: str
     training: dict[str, Any] = field(default_factory=dict)
     evaluation: dict[str, Any] = field(default_factory=dict)
+    evaluation_greedy: dict[str, Any] = field(default_factory=dict)
     sha256: str = ""
     created: str = ""
     command: str = ""
@@ -293,15 +295,19 @@ class Zoo:
 
     def record_evaluation(self, entry: Entry, evaluation: dict[str, Any]) -> Entry:
         """
-        Replace the evaluation on an entry's card, atomically (the model file is left as it is).
+        Replace the evaluation on an entry's card, atomically (the model file is left as it is): the greedy one
+        where ``evaluation["deterministic"]`` is true, else the sampled one.
 
         :param entry: A usable entry
-        :param evaluation: success_rate, episodes, mean_length, ... of the new evaluation
+        :param evaluation: success_rate, episodes, mean_length, deterministic, ... of the new evaluation
         :return: The entry as read back
         """
         if entry.card is None or entry.problem is not None:
             raise ZooError(f"prior {entry.goal!r}: cannot record an evaluation on an unusable entry ({entry.problem})")
-        entry.card.evaluation = dict(evaluation)
+        if evaluation.get("deterministic"):
+            entry.card.evaluation_greedy = dict(evaluation)
+        else:
+            entry.card.evaluation = dict(evaluation)
         write_atomic(entry.path / CARD, json.dumps(asdict(entry.card), indent=2) + "\n")
         return self._read(entry.path, entry.env_id)
 

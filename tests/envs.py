@@ -51,3 +51,28 @@ class ImageEnv(gym.Env):
 
     def step(self, action):
         return self._obs(), float(int(action) == self.target), True, False, {}
+
+
+class CueEnv(gym.Env):
+    """
+    A memory task: the first observation shows a cue (one of two), the second a blank corridor; the action
+    taken at the corridor pays +1 where it names the cue. A policy that sees only the current observation
+    wins half the time; one that remembers the cue always.
+    """
+
+    def __init__(self) -> None:
+        self.observation_space = spaces.Box(0.0, 1.0, (3,), dtype=np.float32)
+        self.action_space = spaces.Discrete(2)
+        self.cue, self.t = 0, 0
+
+    def reset(self, *, seed=None, options=None):
+        super().reset(seed=seed)
+        self.cue, self.t = int(self.np_random.integers(2)), 0
+        return np.eye(3, dtype=np.float32)[self.cue], {}
+
+    def step(self, action):
+        self.t += 1
+        if self.t == 1:
+            return np.eye(3, dtype=np.float32)[2], 0.0, False, False, {}
+        success = int(action) == self.cue
+        return np.eye(3, dtype=np.float32)[2], float(success), True, False, {"is_success": success}

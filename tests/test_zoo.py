@@ -139,9 +139,15 @@ def test_cli_eval_record_rewrites_only_the_evaluation(zoo):
     assert after.card.evaluation["episodes"] == 3 and after.card.evaluation["seed"] == 123
     assert after.card.training == before.card.training and after.card.command == before.card.command
     assert [p.name for p in after.path.iterdir() if p.name.startswith(".")] == []  # no temporary file left
-    result = runner.invoke(app, ["priors", "eval", "bed", "--episodes", "3", "--record", "--deterministic", *args])
-    assert result.exit_code == 2 and "sampled actions" in result.output
-    assert zoo.get("bed", STATE_ID).card.evaluation["seed"] == 123
+    # Both ways by default: greedy and sampled each on the card, side by side in the output.
+    assert after.card.evaluation_greedy["episodes"] == 3 and after.card.evaluation_greedy["deterministic"]
+    assert not after.card.evaluation["deterministic"]
+    words = " ".join(result.output.split())
+    assert "(greedy actions)" in words and "(sampled actions)" in words
+    result = runner.invoke(app, ["priors", "eval", "bed", "--episodes", "4", "--record", "--deterministic", *args])
+    assert result.exit_code == 0, result.output
+    card = zoo.get("bed", STATE_ID).card
+    assert card.evaluation_greedy["episodes"] == 4 and card.evaluation["episodes"] == 3  # only the greedy one changed
 
 
 def test_cli_train_dagger_tiny(tmp_path):

@@ -20,11 +20,29 @@ from stable_baselines3.common.utils import obs_as_tensor
 from stable_baselines3.common.vec_env import VecEnv
 
 from sb3_disagree.acer.buffers import Segment, SegmentReplayBuffer
-from sb3_disagree.acer.objectives import EPS, policy_terms, retrace_targets, trust_region_project
+from sb3_disagree.acer.memory import push_frames
+from sb3_disagree.acer.objectives import EPS, distillation_loss, policy_terms, retrace_targets, trust_region_project
 from sb3_disagree.acer.policies import ACERPolicy, CnnPolicy, MlpPolicy
-from sb3_disagree.behaviour import BehaviourPolicy, OnPolicyBehaviour
+from sb3_disagree.behaviour import BehaviourPolicy, BehaviourStep, OnPolicyBehaviour
 
 SelfACER = TypeVar("SelfACER", bound="ACER")
+
+
+def as_schedule(value: Union[float, str, Schedule]) -> Schedule:
+    """
+    A weight as a function of the remaining progress (1 at the start, 0 at the end).
+
+    :param value: A constant, a schedule, or ``"lin_<x>"``: x at the start, falling linearly to 0
+    """
+    if callable(value):
+        return value
+    if isinstance(value, str):
+        if not value.startswith("lin_"):
+            raise ValueError(f"a schedule string must read 'lin_<start>', got {value!r}")
+        start = float(value[4:])
+        return lambda progress_remaining: progress_remaining * start
+    constant = float(value)
+    return lambda _: constant
 
 
 class ACER(BaseAlgorithm):
@@ -51,12 +69,18 @@ class ACER(BaseAlgorithm):
     :param q_loss: "mse" (the paper's squared error) or "huber" (smooth L1, whose gradient per sample is
         bounded by 1: a large reward arriving late no longer swamps a shared image encoder)
     :param reward_scale: Rewards are multiplied by this in the targets (Q is learned in scaled units)
-    :param ent_coef: Weight of the entropy bonus
+    :param ent_coef: Weight of the entropy bonus: a constant, a function of the remaining progress (from 1 to
+        0), or ``"lin_<x>"`` for a weight falling linearly from x to 0 over the budget (rl-zoo3's notation)
     :param max_grad_norm: Clip of the global gradient norm
     :param c: Truncation of the importance weights in the policy gradient (bias correction beyond it)
     :param trust_region: Whether to use the efficient trust region against the average policy network
     :param alpha: Decay of the average policy network, updated after every optimizer step
     :param delta: Bound of the trust region
+    :param distill_coef: Weight of the distillation term toward the behaviour's teacher (the priors' mixture;
+        kickstarting), 0 for none
+    :param distill_steps: The distillation weight falls linearly to 0 at this many env steps (0: constant)
+    :param distill_states: "followed" distils on the steps where the teacher chose the action, "all" on every
+        step that has a teacher
     :param behaviour: The behaviour policy that chooses the actions during rollouts; sampling from the
         current policy if None. It is not saved with the model.
     :param overlap: Run the replay updates of segment k in a second thread while segment k + 1 is
@@ -95,12 +119,15 @@ class ACER(BaseAlgorithm):
         q_coef: float = 0.5,
         q_loss: str = "mse",
         reward_scale: float = 1.0,
-        ent_coef: float = 0.01,
+        ent_coef: Union[float, str, Schedule] = 0.01,
         max_grad_norm: float = 10.0,
         c: float = 10.0,
         trust_region: bool = True,
         alpha: float = 0.99,
         delta: float = 1.0,
+        distill_coef: float = 0.0,
+        distill_steps: int = 0,
+        distill_states: str = "followed",
         behaviour: Optional[BehaviourPolicy] = None,
         overlap: bool = False,
         stats_window_size: int = 100,
@@ -140,6 +167,14 @@ class ACER(BaseAlgorithm):
         self.trust_region = trust_region
         self.alpha = alpha
         self.delta = delta
+        if distill_states not in ("followed", "all"):
+            raise ValueError(f"distill_states must be 'followed' or 'all', got {distill_states!r}")
+        if distill_coef < 0 or distill_steps < 0:
+            raise ValueError("distill_coef and distill_steps must be >= 0")
+        as_schedule(ent_coef)  # refuses what is not a weight
+        self.distill_coef = distill_coef
+        self.distill_steps = distill_steps
+        self.distill_states = distill_states
         self.behaviour = behaviour
         self.overlap = overlap
         if _init_setup_model:
@@ -155,13 +190,14 @@ class ACER(BaseAlgorithm):
         )
         self.policy = self.policy.to(self.device)
         self.replay_buffer = SegmentReplayBuffer(
-            self.buffer_size, self.n_steps, self.n_envs, self.observation_space, int(self.action_space.n)
+            self.buffer_size, self.n_steps, self.n_envs, self.policy.net_observation_space, int(self.action_space.n)
         )
         self._last_infos: list[dict[str, Any]] = [{} for _ in range(self.n_envs)]
+        self._last_stack: Optional[np.ndarray] = None  # the policy's input: the last frame_stack observations
         self.last_rollout_tags: Optional[np.ndarray] = None
 
     def _excluded_save_params(self) -> list[str]:
-        return [*super()._excluded_save_params(), "behaviour", "_last_infos", "last_rollout_tags"]
+        return [*super()._excluded_save_params(), "behaviour", "_last_infos", "_last_stack", "last_rollout_tags"]
 
     def _get_torch_save_params(self) -> tuple[list[str], list[str]]:
         return ["policy", "policy.optimizer"], []
@@ -175,7 +211,7 @@ class ACER(BaseAlgorithm):
 
     # ------------------------------------------------------------------ rollouts
 
-    def _checked_behaviour_step(self, obs: Any, probs: th.Tensor) -> tuple[np.ndarray, np.ndarray, Optional[np.ndarray]]:
+    def _checked_behaviour_step(self, obs: Any, probs: th.Tensor) -> tuple[np.ndarray, np.ndarray, BehaviourStep]:
         """Ask the behaviour for this step's actions and check that mu is a distribution covering them."""
         step = self.behaviour_policy(obs, probs, self._last_infos, self._last_episode_starts)
         actions = th.as_tensor(step.actions, device=self.device).long().reshape(-1)
@@ -197,10 +233,11 @@ class ACER(BaseAlgorithm):
                 "unbounded. Report the distribution the actions were drawn from, with positive mass on the taken "
                 "action (mix a deterministic choice with some mass on every action)."
             )
-        return actions.cpu().numpy(), mu.cpu().numpy(), step.tags
+        return actions.cpu().numpy(), mu.cpu().numpy(), step
 
-    def _timeout_values(self, dones: np.ndarray, infos: list[dict[str, Any]]) -> np.ndarray:
-        """V of the true last observation where a time limit cut the episode (it is bootstrapped, not terminal)."""
+    def _timeout_values(self, dones: np.ndarray, infos: list[dict[str, Any]], stack: np.ndarray) -> np.ndarray:
+        """V of the true last observation where a time limit cut the episode (it is bootstrapped, not terminal);
+        ``stack`` is the policy's input before the step, onto which that observation is pushed."""
         values = np.zeros(len(dones), dtype=np.float32)
         idx = [
             i
@@ -209,6 +246,7 @@ class ACER(BaseAlgorithm):
         ]
         if idx:
             terminal = np.stack([infos[i]["terminal_observation"] for i in idx])
+            terminal = push_frames(stack[idx], terminal, None, self.policy.frame_stack)
             with th.no_grad():
                 logits, q = self.policy.logits_and_q(obs_as_tensor(terminal, self.device))
                 values[idx] = (th.softmax(logits, -1) * q).sum(-1).cpu().numpy()
@@ -234,7 +272,10 @@ class ACER(BaseAlgorithm):
         assert self._last_obs is not None, "No previous observation was provided"
         self.policy.set_training_mode(False)
         n_envs, n_actions = env.num_envs, int(self.action_space.n)
-        obs_shape = self.observation_space.shape
+        k = self.policy.frame_stack
+        obs_shape = self.policy.net_observation_space.shape
+        if self._last_stack is None or self._last_stack.shape[0] != n_envs:
+            self._last_stack = push_frames(None, self._last_obs, None, k)  # type: ignore[arg-type]
         observations = np.zeros((self.n_steps + 1, n_envs, *obs_shape), dtype=self.observation_space.dtype)
         actions_buf = np.zeros((self.n_steps, n_envs), dtype=np.int64)
         rewards_buf = np.zeros((self.n_steps, n_envs), dtype=np.float32)
@@ -242,13 +283,17 @@ class ACER(BaseAlgorithm):
         timeout_buf = np.zeros((self.n_steps, n_envs), dtype=np.float32)
         mu_buf = np.zeros((self.n_steps, n_envs, n_actions), dtype=np.float32)
         tags_buf: list[Optional[np.ndarray]] = []
+        teacher_buf = np.zeros((self.n_steps, n_envs, n_actions), dtype=np.float32)
+        followed_buf = np.zeros((self.n_steps, n_envs), dtype=np.float32)
 
         callback.on_rollout_start()
         for step in range(self.n_steps):
-            observations[step] = self._last_obs
+            observations[step] = self._last_stack
             with th.no_grad():
-                probs = self.policy.action_probs(obs_as_tensor(self._last_obs, self.device))  # type: ignore[arg-type]
-            actions, mu, tags = self._checked_behaviour_step(self._last_obs, probs)
+                probs = self.policy.action_probs(obs_as_tensor(self._last_stack, self.device))
+            # The behaviour (the priors) sees the single observation its policies were trained on.
+            actions, mu, behaviour_step = self._checked_behaviour_step(self._last_obs, probs)
+            tags = behaviour_step.tags
 
             new_obs, rewards, dones, infos = env.step(actions)
             self.num_timesteps += n_envs
@@ -263,17 +308,22 @@ class ACER(BaseAlgorithm):
             dones_buf[step] = dones
             mu_buf[step] = mu
             tags_buf.append(tags)
+            if behaviour_step.teacher is not None:
+                teacher_buf[step] = _as_numpy(behaviour_step.teacher)
+                if behaviour_step.followed is not None:
+                    followed_buf[step] = _as_numpy(behaviour_step.followed)
             if dones.any():
-                timeout_buf[step] = self._timeout_values(dones, infos)
+                timeout_buf[step] = self._timeout_values(dones, infos, self._last_stack)
             self._last_obs = new_obs  # type: ignore[assignment]
+            self._last_stack = push_frames(self._last_stack, new_obs, dones, k)  # type: ignore[arg-type]
             self._last_episode_starts = dones
             self._last_infos = self._infos_of_current_obs(env, infos, dones)
 
-        observations[self.n_steps] = self._last_obs
+        observations[self.n_steps] = self._last_stack
         self.last_rollout_tags = None if any(t is None for t in tags_buf) else np.stack(tags_buf)
         callback.update_locals(locals())
         callback.on_rollout_end()
-        return Segment(observations, actions_buf, rewards_buf, dones_buf, timeout_buf, mu_buf)
+        return Segment(observations, actions_buf, rewards_buf, dones_buf, timeout_buf, mu_buf, teacher_buf, followed_buf)
 
     # ------------------------------------------------------------------ updates
 
@@ -316,7 +366,8 @@ class ACER(BaseAlgorithm):
         # The policy objective as a function of the probability vector f, where the trust region acts.
         f = probs.detach().requires_grad_(True)
         terms = policy_terms(f, actions, q_values.detach(), values, q_ret, rho, self.c)
-        objective = (terms.truncated_is + terms.bias_correction + self.ent_coef * terms.entropy).mean()
+        ent_coef = float(as_schedule(self.ent_coef)(self._current_progress_remaining))
+        objective = (terms.truncated_is + terms.bias_correction + ent_coef * terms.entropy).mean()
         (g,) = th.autograd.grad(objective * n, f)
         tr_scale = th.zeros(n, device=self.device)
         if self.trust_region:
@@ -324,6 +375,15 @@ class ACER(BaseAlgorithm):
             k = -average_probs / (f.detach() + EPS)
             g, tr_scale = trust_region_project(g, k, self.delta)
         loss = -(probs * g.detach()).sum() / n + self.q_coef * q_loss
+        distill_coef, distill = self._distill_coef(), th.zeros(())
+        if distill_coef > 0 and segment.teacher is not None:
+            teacher = th.as_tensor(segment.teacher, device=self.device).reshape(n, -1)
+            has_teacher = (teacher.sum(-1) > 0).float()
+            weights = has_teacher
+            if self.distill_states == "followed" and segment.followed is not None:
+                weights = has_teacher * th.as_tensor(segment.followed, device=self.device).reshape(n)
+            distill = distillation_loss(th.log_softmax(logits[:n], dim=-1), teacher, weights)
+            loss = loss + distill_coef * distill
 
         policy.optimizer.zero_grad()
         loss.backward()
@@ -340,7 +400,15 @@ class ACER(BaseAlgorithm):
             "rho_truncated_fraction": (rho_taken > self.c).float().mean().item(),
             "trust_region_active_fraction": (tr_scale > 0).float().mean().item(),
             "grad_norm": float(grad_norm),
+            "ent_coef": ent_coef,
+            **({"distill_loss": distill.item(), "distill_coef": distill_coef} if self.distill_coef > 0 else {}),
         }
+
+    def _distill_coef(self) -> float:
+        """The distillation weight now: ``distill_coef * max(0, 1 - num_timesteps / distill_steps)``."""
+        if self.distill_steps <= 0:
+            return self.distill_coef
+        return self.distill_coef * max(0.0, 1.0 - self.num_timesteps / self.distill_steps)
 
     def train(self, segment: Segment) -> None:
         """
@@ -403,6 +471,8 @@ class ACER(BaseAlgorithm):
         """
         iteration = 0
         total_timesteps, callback = self._setup_learn(total_timesteps, callback, reset_num_timesteps, tb_log_name, progress_bar)
+        if reset_num_timesteps:
+            self._last_stack = None  # rebuilt from the reset observations
         if reset_num_timesteps or len(self._last_infos) != self.n_envs:
             reset_infos = getattr(self.env, "reset_infos", None)
             self._last_infos = [dict(i) for i in reset_infos] if reset_infos else [{} for _ in range(self.n_envs)]
@@ -520,5 +590,12 @@ class ACER(BaseAlgorithm):
                 f"The replay buffer holds segments of (n_steps, n_envs, n_actions) = "
                 f"{(buffer.n_steps, buffer.n_envs, buffer.n_actions)}, the model expects {expected}"
             )
+        if not hasattr(buffer, "teacher"):  # saved before the buffer kept a teacher: none
+            buffer.teacher = np.zeros_like(buffer.mu)
+            buffer.followed = np.zeros_like(buffer.rewards)
         self.replay_buffer = buffer
+
+
+def _as_numpy(x: Union[np.ndarray, th.Tensor]) -> np.ndarray:
+    return x.detach().cpu().numpy() if isinstance(x, th.Tensor) else np.asarray(x)
 

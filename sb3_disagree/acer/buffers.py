@@ -20,6 +20,8 @@ class Segment:
     :param timeout_values: V(x_{t+1}) of the true last observation where a time limit truncated the
         episode at step t, else 0; shape (T, E)
     :param mu: Behaviour distribution at each step, shape (T, E, A)
+    :param teacher: Distribution to distil toward at each step (the priors' mixture), shape (T, E, A), or None
+    :param followed: 1.0 where the teacher chose the action at step t, shape (T, E), or None
     """
 
     observations: np.ndarray
@@ -28,6 +30,8 @@ class Segment:
     dones: np.ndarray
     timeout_values: np.ndarray
     mu: np.ndarray
+    teacher: Optional[np.ndarray] = None
+    followed: Optional[np.ndarray] = None
 
     @property
     def n_steps(self) -> int:
@@ -67,6 +71,9 @@ class SegmentReplayBuffer:
         self.dones = np.zeros((s, t, e), dtype=np.float32)
         self.timeout_values = np.zeros((s, t, e), dtype=np.float32)
         self.mu = np.zeros((s, t, e, n_actions), dtype=np.float32)
+        # Zero rows mean "no teacher" (a distillation term weighs them by 0).
+        self.teacher = np.zeros((s, t, e, n_actions), dtype=np.float32)
+        self.followed = np.zeros((s, t, e), dtype=np.float32)
         self.pos = 0
         self.full = False
 
@@ -92,6 +99,8 @@ class SegmentReplayBuffer:
         self.dones[i] = segment.dones
         self.timeout_values[i] = segment.timeout_values
         self.mu[i] = segment.mu
+        self.teacher[i] = 0.0 if segment.teacher is None else segment.teacher
+        self.followed[i] = 0.0 if segment.followed is None else segment.followed
         self.pos = (self.pos + 1) % self.n_segments
         self.full = self.full or self.pos == 0
 
@@ -115,4 +124,6 @@ class SegmentReplayBuffer:
             dones=self.dones[seg, :, env].T,
             timeout_values=self.timeout_values[seg, :, env].T,
             mu=np.moveaxis(self.mu[seg, :, env], 0, 1),
+            teacher=np.moveaxis(self.teacher[seg, :, env], 0, 1),
+            followed=self.followed[seg, :, env].T,
         )

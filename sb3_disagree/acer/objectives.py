@@ -126,3 +126,17 @@ def trust_region_project(g: th.Tensor, k: th.Tensor, delta: float) -> tuple[th.T
     """
     scale = th.clamp(((k * g).sum(-1) - delta) / (k * k).sum(-1).clamp_min(1e-12), min=0.0)
     return g - scale.unsqueeze(-1) * k, scale
+
+
+def distillation_loss(log_probs: th.Tensor, teacher: th.Tensor, weights: th.Tensor) -> th.Tensor:
+    """
+    The kickstarting term (Schmitt et al. 2018): the cross-entropy from a teacher's distribution to the
+    policy, weighted per step and averaged over the batch. Its gradient is that of ``KL(teacher || pi)``.
+
+    ``L = (1 / N) sum_t w_t * (- sum_a teacher_t(a) log pi_t(a))``
+
+    :param log_probs: log pi_t(.), shape (N, A)
+    :param teacher: teacher_t(.), shape (N, A)
+    :param weights: w_t >= 0, shape (N,)
+    """
+    return (weights * -(teacher * log_probs).sum(-1)).mean()

@@ -9,11 +9,14 @@ import torch as th
 from gymnasium import spaces
 from stable_baselines3.common.distributions import CategoricalDistribution
 from stable_baselines3.common.policies import BasePolicy
+from stable_baselines3.common.preprocessing import maybe_transpose
 from stable_baselines3.common.sb2_compat.rmsprop_tf_like import RMSpropTFLike
 from stable_baselines3.common.torch_layers import BaseFeaturesExtractor, FlattenExtractor, NatureCNN
 from stable_baselines3.common.type_aliases import PyTorchObs, Schedule
 from stable_baselines3.common.utils import polyak_update
 from torch import nn
+
+from sb3_disagree.acer.memory import push_frames, stacked_space
 
 
 def _mlp(in_dim: int, sizes: list[int], activation_fn: type[nn.Module]) -> tuple[nn.Sequential, int]:
@@ -86,6 +89,9 @@ class ACERPolicy(BasePolicy):
     :param normalize_images: Whether to divide images by 255
     :param optimizer_class: The optimizer; RMSprop with TensorFlow semantics by default, as in the reference
     :param optimizer_kwargs: Additional keyword arguments, excluding the learning rate, to pass to the optimizer
+    :param frame_stack: Number of recent observations the networks see, stacked along the channel axis (1: the
+        current one only). The stack is the ``state`` that :meth:`predict` takes and returns, so SB3's
+        ``evaluate_policy`` carries it with the env as registered; ACER keeps it during rollouts
     """
 
     def __init__(
@@ -101,7 +107,10 @@ class ACERPolicy(BasePolicy):
         normalize_images: bool = True,
         optimizer_class: type[th.optim.Optimizer] = RMSpropTFLike,
         optimizer_kwargs: Optional[dict[str, Any]] = None,
+        frame_stack: int = 1,
     ) -> None:
+        if frame_stack < 1:
+            raise ValueError(f"frame_stack must be >= 1, got {frame_stack}")
         if optimizer_kwargs is None:
             optimizer_kwargs = {}
             if optimizer_class is RMSpropTFLike:
@@ -125,8 +134,14 @@ class ACERPolicy(BasePolicy):
         self.activation_fn = activation_fn
         self.ortho_init = ortho_init
         self.n_actions = int(action_space.n)
+        self.frame_stack = frame_stack
+        self.net_observation_space = stacked_space(observation_space, frame_stack)  # type: ignore[arg-type]
         self.action_dist = CategoricalDistribution(self.n_actions)
         self._build(lr_schedule)
+
+    def make_features_extractor(self) -> BaseFeaturesExtractor:
+        """The features extractor of the networks' input: the stack of ``frame_stack`` observations."""
+        return self.features_extractor_class(self.net_observation_space, **self.features_extractor_kwargs)
 
     def _build(self, lr_schedule: Schedule) -> None:
         self.net = ACERNetwork(self.make_features_extractor(), self.net_arch, self.activation_fn, self.n_actions)
@@ -152,6 +167,7 @@ class ACERPolicy(BasePolicy):
                 features_extractor_kwargs=self.features_extractor_kwargs,
                 optimizer_class=self.optimizer_class,
                 optimizer_kwargs=self.optimizer_kwargs,
+                frame_stack=self.frame_stack,
             )
         )
         return data
@@ -194,6 +210,35 @@ class ACERPolicy(BasePolicy):
 
     def _predict(self, observation: PyTorchObs, deterministic: bool = False) -> th.Tensor:
         return self.get_distribution(observation).get_actions(deterministic=deterministic)
+
+    def predict(
+        self,
+        observation: Union[np.ndarray, dict[str, np.ndarray]],
+        state: Optional[tuple[np.ndarray, ...]] = None,
+        episode_start: Optional[np.ndarray] = None,
+        deterministic: bool = False,
+    ) -> tuple[np.ndarray, Optional[tuple[np.ndarray, ...]]]:
+        """
+        The policy's actions for a batch of observations; with ``frame_stack > 1`` the stack of recent
+        observations rides in ``state`` (a 1-tuple holding the stacks), as recurrent SB3 policies carry theirs.
+
+        :param observation: The observations, as the env gives them
+        :param state: The stacks returned by the previous call (None at the start: zeros)
+        :param episode_start: True where the observation is the first of an episode (the stack is cleared)
+        :param deterministic: Greedy actions if True, sampled otherwise
+        :return: The actions and the new state (None without frame stacking)
+        """
+        if self.frame_stack == 1:
+            return super().predict(observation, state, episode_start, deterministic)
+        self.set_training_mode(False)
+        obs = np.asarray(maybe_transpose(observation, self.observation_space))  # type: ignore[arg-type]
+        vectorized = obs.shape != self.observation_space.shape
+        obs = obs.reshape((-1, *self.observation_space.shape))  # type: ignore[misc]
+        stack = push_frames(None if state is None else state[0], obs, episode_start, self.frame_stack)
+        with th.no_grad():
+            actions = self._predict(th.as_tensor(stack, device=self.device), deterministic=deterministic)
+        actions = actions.cpu().numpy().reshape((-1, *self.action_space.shape))  # type: ignore[misc]
+        return (actions if vectorized else actions.squeeze(axis=0)), (stack,)
 
     def update_average(self, alpha: float) -> None:
         """

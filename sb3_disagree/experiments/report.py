@@ -47,18 +47,21 @@ class CellSummary:
     records: list[dict] = field(default_factory=list)
     alone_steps: np.ndarray = field(default_factory=lambda: np.zeros(0))
     alone_mean: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    alone_greedy: np.ndarray = field(default_factory=lambda: np.zeros(0))  # empty where not measured
+    final_greedy_seeds: list[float] = field(default_factory=list)  # empty where not measured
     seed_final: list[float] = field(default_factory=list)  # each seed's training success at the last grid step
     seed_steps_to_90: list[Optional[float]] = field(default_factory=list)
 
 
-def alone_curve(folders: list[Path]) -> tuple[np.ndarray, np.ndarray]:
-    """The periodic evaluations of the new policy alone (``evaluations.npz``), averaged over runs at common steps."""
+def alone_curve(folders: list[Path], key: str = "successes") -> tuple[np.ndarray, np.ndarray]:
+    """The periodic evaluations of the new policy alone (``evaluations.npz``), averaged over runs at common
+    steps: sampled actions (``successes``) or greedy ones (``successes_greedy``, where the runs measured it)."""
     evals = [np.load(f / "evaluations.npz") for f in folders if (f / "evaluations.npz").exists()]
-    if not evals:
+    if not evals or any(key not in e for e in evals):
         return np.zeros(0), np.zeros(0)
     n = min(len(e["timesteps"]) for e in evals)
     steps = evals[0]["timesteps"][:n]
-    return steps, np.mean([e["successes"][:n].mean(axis=1) for e in evals], axis=0)
+    return steps, np.mean([e[key][:n].mean(axis=1) for e in evals], axis=0)
 
 
 def summarize(experiment: Experiment, root: Path) -> tuple[np.ndarray, list[CellSummary]]:
@@ -87,14 +90,24 @@ def summarize(experiment: Experiment, root: Path) -> tuple[np.ndarray, list[Cell
             at[b] = float(mean[i]) if i >= 0 else float("nan")
         alone = [r["final_alone"]["success_rate"] for r in records]
         alone_steps, alone_mean = alone_curve(folders)
+        alone_greedy = alone_curve(folders, "successes_greedy")[1]
+        greedy = [r["final_alone_greedy"]["success_rate"] for r in records if "final_alone_greedy" in r]
         summaries.append(CellSummary(
             cell=cell, seeds=[r.seed for r in runs], mean=mean, low=low, high=high, usage=usage,
             steps_to_50=steps_to(mean, grid, 0.5), steps_to_90=steps_to(mean, grid, 0.9), at_budgets=at,
             auc=float(np.mean(np.nan_to_num(mean, nan=0.0))), final_alone=float(np.mean(alone)),
             final_alone_seeds=alone, fps=float(np.mean([r["fps"] for r in records])), records=records,
-            alone_steps=alone_steps, alone_mean=alone_mean, seed_final=[float(c[-1]) for c in curves],
+            alone_steps=alone_steps, alone_mean=alone_mean, alone_greedy=alone_greedy,
+            final_greedy_seeds=greedy if len(greedy) == len(records) else [], seed_final=[float(c[-1]) for c in curves],
             seed_steps_to_90=[steps_to(c, grid, 0.9) for c in curves]))
     return grid, summaries
+
+
+def _per_seed(values: list[float]) -> str:
+    """The mean and, in brackets, each seed's value; "not measured" for none."""
+    if not values:
+        return "not measured"
+    return f"{np.mean(values):.2f} ({', '.join(f'{v:.2f}' for v in values)})"
 
 
 def _steps(value: Optional[float]) -> str:
@@ -104,13 +117,12 @@ def _steps(value: Optional[float]) -> str:
 def table_markdown(experiment: Experiment, summaries: list[CellSummary]) -> str:
     """The report's table as Markdown."""
     budgets = "".join(f" success at {_steps(b)} |" for b in experiment.budgets)
-    lines = [f"| cell | seeds | steps to 50% | steps to 90% |{budgets} AUC | new policy alone (final) | env steps/s |",
-             "|---" * (7 + len(experiment.budgets)) + "|"]
+    lines = [f"| cell | seeds | steps to 50% | steps to 90% |{budgets} AUC | new policy alone (final), greedy | "
+             "new policy alone (final), sampled | env steps/s |", "|---" * (8 + len(experiment.budgets)) + "|"]
     for s in summaries:
         at = "".join(f" {s.at_budgets[b]:.2f} |" for b in experiment.budgets)
         lines.append(f"| {s.cell} | {len(s.seeds)} | {_steps(s.steps_to_50)} | {_steps(s.steps_to_90)} |{at} "
-                     f"{s.auc:.2f} | {s.final_alone:.2f} ({', '.join(f'{a:.2f}' for a in s.final_alone_seeds)}) | "
-                     f"{s.fps:.0f} |")
+                     f"{s.auc:.2f} | {_per_seed(s.final_greedy_seeds)} | {_per_seed(s.final_alone_seeds)} | {s.fps:.0f} |")
     return "\n".join(lines)
 
 
@@ -180,6 +192,9 @@ def plot(experiment: Experiment, grid: np.ndarray, summaries: list[CellSummary],
             ax1.fill_between(grid, np.clip(s.low, 0, 1), np.clip(s.high, 0, 1), color=colors(i), alpha=0.2)
         if len(s.alone_steps):
             ax1.plot(s.alone_steps, s.alone_mean, "--o", color=colors(i), markersize=3, linewidth=1)
+        if len(s.alone_greedy):
+            ax1.plot(s.alone_steps[:len(s.alone_greedy)], s.alone_greedy, ":s", color=colors(i), markersize=3,
+                     linewidth=1)
         if not np.all(np.isnan(s.usage)):
             ax2.plot(grid, s.usage, color=colors(i), label=s.cell)
     priors = experiment.priors if isinstance(experiment.priors, str) else " + ".join(experiment.priors)
@@ -187,8 +202,12 @@ def plot(experiment: Experiment, grid: np.ndarray, summaries: list[CellSummary],
             title=f"{experiment.name}: {experiment.goal}, priors {priors}")
     ax2.set(xlabel="env steps", ylabel="share of steps following the priors", ylim=(-0.02, 1.02),
             title="prior usage (mean over seeds)")
-    ax1.legend(loc="lower right", fontsize=8, title="solid: training; dashed: the new policy alone" if any(
-        len(s.alone_steps) for s in summaries) else None, title_fontsize=7)
+    legend_title = None
+    if any(len(s.alone_greedy) for s in summaries):
+        legend_title = "solid: training; the new policy alone: dashed sampled, dotted greedy"
+    elif any(len(s.alone_steps) for s in summaries):
+        legend_title = "solid: training; dashed: the new policy alone (sampled)"
+    ax1.legend(loc="lower right", fontsize=8, title=legend_title, title_fontsize=7)
     if ax2.lines:
         ax2.legend(loc="upper right", fontsize=8)
     for ax, s in zip(path_axes, summaries):

@@ -60,7 +60,7 @@ def train_and_evaluate(run: Run, folder: Path, source: Optional[Path] = None) ->
     # One torch thread per run, as several share a machine; an overlapped run works in two threads, and its
     # on-policy update (while the other thread is idle) may use both.
     th.set_num_threads(2 if run.config.overlap else 1)
-    from sb3_disagree.training import evaluate_alone, train
+    from sb3_disagree.training import FINAL_EVAL_SEED_OFFSET, evaluate_alone, train
 
     begun = _start_from(source, folder) if source is not None else 0
     start = time.perf_counter()
@@ -71,9 +71,13 @@ def train_and_evaluate(run: Run, folder: Path, source: Optional[Path] = None) ->
     if not finished:
         raise KeyboardInterrupt
     seconds = time.perf_counter() - start
-    alone = evaluate_alone(model, asdict(run.config), run.final_episodes, deterministic=False, seed=run.seed + 20_000)
+    # The new policy alone from env seeds the run never trained on, sampled and greedy (SB3's default).
+    config, seed = asdict(run.config), run.seed + FINAL_EVAL_SEED_OFFSET
+    alone = evaluate_alone(model, config, run.final_episodes, deterministic=False, seed=seed)
+    greedy = evaluate_alone(model, config, run.final_episodes, deterministic=True, seed=seed)
     result = {"cell": run.cell, "seed": run.seed, "steps": int(model.num_timesteps), "seconds": round(seconds, 1),
               "fps": round((model.num_timesteps - begun) / max(seconds, 1e-9), 1), "final_alone": alone.as_dict(),
+              "final_alone_greedy": greedy.as_dict(),
               "config": asdict(run.config), **({"continued_from": str(source), "from_steps": begun} if source else {})}
     write_atomic(folder / RESULT, json.dumps(result, indent=2) + "\n")
     return result

@@ -62,7 +62,8 @@ class OptionsBehaviour(BehaviourPolicy):
         self._record("prior/usage", follow.mean())
         self._record("prior/branch", branch.mean())
         self._record("prior/entropy", float(h.mean()))
-        return BehaviourStep(actions, mu, np.where(follow, PRIOR, EXPLORE))
+        return BehaviourStep(actions, mu, np.where(follow, PRIOR, EXPLORE), teacher=mix,
+                             followed=follow.astype(np.float32))
 
     def _record(self, key: str, value: float) -> None:
         self._stats.setdefault(key, []).append(float(value))

@@ -1,0 +1,115 @@
+"""The new policy's memory (a stack of recent observations), the entropy schedule and the distillation term."""
+
+import numpy as np
+import pytest
+import torch as th
+from envs import CueEnv, ImageEnv
+from stable_baselines3.common.env_util import make_vec_env
+from stable_baselines3.common.evaluation import evaluate_policy
+
+from sb3_disagree import ACER
+from sb3_disagree.acer.acer import as_schedule
+from sb3_disagree.acer.memory import push_frames
+from sb3_disagree.acer.objectives import distillation_loss
+from sb3_disagree.behaviour import BehaviourPolicy, BehaviourStep
+
+
+def test_push_frames_drops_the_oldest_and_clears_at_episode_starts():
+    stack = np.arange(2 * 3 * 2).reshape(2, 6, 1).astype(np.int64)  # 2 envs, 3 frames of 2 channels
+    new = push_frames(stack, np.full((2, 2, 1), -1), np.array([False, True]), k=3)
+    assert new[0, :, 0].tolist() == [2, 3, 4, 5, -1, -1]
+    assert new[1, :, 0].tolist() == [0, 0, 0, 0, -1, -1]
+    assert push_frames(None, np.ones((1, 2, 1)), None, k=2)[0, :, 0].tolist() == [0, 0, 1, 1]
+    obs = np.ones((1, 2))
+    assert push_frames(stack, obs, None, k=1) is obs
+
+
+def test_a_stacking_policy_remembers_the_cue_under_sb3s_evaluate_policy(tmp_path):
+    hyper = dict(n_steps=4, learning_rate=3e-3, replay_ratio=2, replay_start=64, ent_coef=0.0, seed=0)
+    results = {}
+    for k in (1, 2):
+        model = ACER("MlpPolicy", make_vec_env(CueEnv, n_envs=4, seed=0), policy_kwargs=dict(frame_stack=k), **hyper)
+        model.learn(6_000)
+        model.save(tmp_path / f"k{k}.zip")
+        loaded = ACER.load(tmp_path / f"k{k}.zip")
+        assert loaded.policy.frame_stack == k
+        rewards, _ = evaluate_policy(loaded, make_vec_env(CueEnv, n_envs=4, seed=99), n_eval_episodes=200,
+                                     return_episode_rewards=True)
+        results[k] = float(np.mean(rewards))
+    assert results[2] >= 0.95, results  # the cue is remembered: greedy, with the env as registered
+    assert results[1] <= 0.7, results  # without memory the corridor looks the same after either cue
+
+
+def test_predict_carries_the_stack_in_state_and_clears_it_at_episode_starts():
+    model = ACER("MlpPolicy", make_vec_env(CueEnv, n_envs=2), policy_kwargs=dict(frame_stack=3))
+    first = np.eye(3, dtype=np.float32)[[0, 1]]
+    actions, state = model.predict(first, episode_start=np.ones(2, bool), deterministic=True)
+    assert actions.shape == (2,) and state[0].shape == (2, 9)
+    assert np.array_equal(state[0][:, 6:], first) and not state[0][:, :6].any()
+    _, state = model.predict(first[::-1], state=state, episode_start=np.array([False, True]), deterministic=True)
+    assert np.array_equal(state[0][0, 3:6], first[0]) and not state[0][1, :6].any()
+    # A single (unbatched) observation gives a single action.
+    action, _ = model.predict(first[0], deterministic=True)
+    assert np.ndim(action) == 0
+
+
+class Recorder(BehaviourPolicy):
+    def __init__(self):
+        self.shapes = set()
+
+    def __call__(self, observations, probs, infos, episode_starts):
+        self.shapes.add(tuple(np.asarray(observations).shape))
+        return BehaviourStep(th.multinomial(probs, 1).squeeze(-1), probs)
+
+
+def test_the_behaviour_gets_single_frames_while_the_policy_sees_stacks():
+    recorder = Recorder()
+    env = make_vec_env(ImageEnv, n_envs=2, seed=0)
+    model = ACER("CnnPolicy", env, n_steps=3, replay_start=6, behaviour=recorder, policy_kwargs=dict(frame_stack=4))
+    model.learn(12)
+    assert recorder.shapes == {(2, 3, 40, 40)}  # channels first, one frame: what a prior was trained on
+    assert model.replay_buffer.observations.shape[-3:] == (12, 40, 40)
+    assert model.policy.net.features_extractor.cnn[0].in_channels == 12
+
+
+def test_distillation_loss_against_a_hand_computation():
+    probs = th.tensor([[0.5, 0.25, 0.25], [0.2, 0.3, 0.5]])
+    teacher = th.tensor([[1.0, 0.0, 0.0], [0.0, 0.5, 0.5]])
+    weights = th.tensor([1.0, 0.5])
+    # Row 1: -log 0.5 = 0.6931; row 2: 0.5 * -(0.5 log 0.3 + 0.5 log 0.5) = 0.4743; mean 0.5837.
+    assert distillation_loss(probs.log(), teacher, weights).item() == pytest.approx(0.58372, abs=1e-4)
+    assert distillation_loss(probs.log(), teacher, th.zeros(2)).item() == 0.0
+
+
+class Teacher(BehaviourPolicy):
+    """Acts with the policy and offers a fixed teacher that always says action 2."""
+
+    def __call__(self, observations, probs, infos, episode_starts):
+        teacher = th.zeros_like(probs)
+        teacher[:, 2] = 1.0
+        return BehaviourStep(th.multinomial(probs, 1).squeeze(-1), probs, teacher=teacher,
+                             followed=np.ones(len(probs), np.float32))
+
+
+def test_distillation_pulls_the_policy_to_the_teacher_and_fades_on_schedule():
+    obs = th.as_tensor(np.stack([np.full((3, 40, 40), 60 * (t + 1), np.uint8) for t in range(3)]))
+    prob_of_2 = {}
+    for coef in (0.0, 1.0):
+        model = ACER("CnnPolicy", make_vec_env(ImageEnv, n_envs=2, seed=0), n_steps=4, replay_ratio=0, ent_coef=0.0,
+                     learning_rate=1e-3, distill_coef=coef, behaviour=Teacher(), seed=0)
+        model.learn(800)
+        prob_of_2[coef] = model.policy.action_probs(obs)[:, 2].mean().item()
+    assert prob_of_2[1.0] > 0.8 and prob_of_2[0.0] < 0.6, prob_of_2
+    model.distill_steps = 400
+    assert model._distill_coef() == 0.0  # annealed linearly to zero at distill_steps
+    model.num_timesteps = 100
+    assert model._distill_coef() == pytest.approx(0.75)
+
+
+def test_entropy_weight_schedules():
+    assert as_schedule("lin_0.01")(0.5) == pytest.approx(0.005)
+    assert as_schedule(0.02)(0.1) == 0.02
+    with pytest.raises(ValueError, match="lin_"):
+        as_schedule("exp_0.1")
+    with pytest.raises(ValueError, match="distill_states"):
+        ACER("MlpPolicy", make_vec_env(CueEnv, n_envs=1), distill_states="some")
