@@ -149,6 +149,9 @@ def train(
     validation_episodes: int = typer.Option(0, "--validation-episodes",
                                             help="DAgger: evaluate each round's policy on this many episodes (env "
                                             "seeds 20000+) and keep the best round's, not the last (0: the last)."),
+    learner_actions: str = typer.Option("sampled", "--learner-actions", help="DAgger: how the learner acts in "
+                                        "the rounds it leads, sampled or greedy (visits where a greedy policy gets "
+                                        "stuck, so that the expert labels them)."),
     n_envs: int = typer.Option(4, "--n-envs"),
     seed: int = typer.Option(0, "--seed"),
     episodes: int = typer.Option(100, "--episodes", help="Evaluation episodes for the card."),
@@ -176,6 +179,7 @@ def train(
                 model, record = train_dagger(venv, seed=seed, rounds=rounds, steps_per_round=steps_per_round,
                                              epochs=epochs, final_epochs=final_epochs, validation_env=validation_env,
                                              validation_episodes=validation_episodes, validation_seed=VALIDATION_SEED,
+                                             learner_actions=learner_actions,
                                              progress=lambda line: (progress.advance(task), console.print(line)))
         else:
             model, record = train_rl(venv, method, steps, seed=seed, progress_bar=True)

@@ -48,7 +48,8 @@ class LiveDisplay(BaseCallback):
 def train(
     goal: str = typer.Option(..., "--goal", help="The new goal word."),
     env: str = typer.Option(DEFAULT_ENV, "--env", help="Gymnasium id of the environment."),
-    mode: str = typer.Option("disagreement", "--mode", help="disagreement, room-sensor or scratch."),
+    mode: str = typer.Option("disagreement", "--mode", help="disagreement, room-sensor, scratch, finetune (start "
+                             "from the nearest prior), kickstart (distil the priors) or jsrl (Jump-Start RL)."),
     priors: str = typer.Option("auto", "--priors", help="auto (by similarity), or goals: a,b"),
     alpha: int = typer.Option(10, "--alpha", help="Disagreement window."),
     beta: float = typer.Option(0.1, "--beta", help="Follow priors while the window's mean disagreement is below this."),
@@ -66,6 +67,10 @@ def train(
     overlap: bool = typer.Option(True, "--overlap/--no-overlap", help="Replay updates in a second thread while "
                                  "the next segment is collected (faster on two cores); --no-overlap for the "
                                  "sequential loop the experiments use."),
+    frame_stack: int = typer.Option(1, "--frame-stack", help="The new policy sees its last this many observations "
+                                    "(its memory); the priors keep one."),
+    jsrl_horizon: int = typer.Option(0, "--jsrl-horizon", help="jsrl: the guide's first horizon in steps (0: the "
+                                     "priors' mean episode length on their cards)."),
     out: Path = typer.Option(Path("runs"), "--out", help="Root folder of the runs."),
     resume: Optional[Path] = typer.Option(None, "--resume", help="A run folder to continue."),
 ) -> None:
@@ -77,6 +82,7 @@ def train(
                            priors="auto" if priors == "auto" else [p.strip() for p in priors.split(",") if p.strip()],
                            alpha=alpha, beta=beta, steps=100_000 if steps is None else steps, seed=seed, n_envs=n_envs,
                            eval_every=eval_every, eval_episodes=eval_episodes, vec_env=vec_env, overlap=overlap,
+                           frame_stack=frame_stack, jsrl_horizon=jsrl_horizon,
                            embedding=str(embedding) if embedding else None, zoo=str(zoo) if zoo else None)
         if resume is None:
             config.validate()

@@ -93,6 +93,7 @@ def train_dagger(
     validation_env: Optional[VecEnv] = None,
     validation_episodes: int = 0,
     validation_seed: int = 20_000,
+    learner_actions: str = "sampled",
     progress: Optional[Callable[[str], None]] = None,
 ) -> tuple[ACER, dict[str, Any]]:
     """
@@ -115,9 +116,15 @@ def train_dagger(
         rather than the last one
     :param validation_episodes: Episodes per validation (0: return the last round's policy)
     :param validation_seed: Env seed of every validation, so that each round meets the same starts
+    :param learner_actions: How the learner acts in the rounds it leads: "sampled", or "greedy" (its argmax, as
+        SB3's ``evaluate_policy`` acts), so that the states where a greedy policy gets stuck (walking into a
+        wall) are visited and labelled; validation then evaluates greedily too
     :param progress: Called with a line of text after each round
     :return: An ACER model whose policy imitates the expert, and a record of the training
     """
+    if learner_actions not in ("sampled", "greedy"):
+        raise ValueError(f"learner_actions must be 'sampled' or 'greedy', got {learner_actions!r}")
+    greedy = learner_actions == "greedy"
     name = policy_name(env)
     model = ACER(name, env, seed=seed, policy_kwargs=PRIOR_POLICY_KWARGS[name])
     env = model.get_env()  # as the policy sees it (channel-first images)
@@ -141,7 +148,7 @@ def train_dagger(
             if r == 0:
                 actions = labels
             else:
-                learner, _ = model.predict(obs, deterministic=False)
+                learner, _ = model.predict(obs, deterministic=greedy)
                 actions = np.where(rng.random(env.num_envs) < beta, labels, learner)
             obs, _, dones, _ = env.step(actions)
             ep_len = np.where(dones, 0, ep_len + 1)
@@ -155,14 +162,14 @@ def train_dagger(
         line = f"round {r + 1}/{rounds}: {len(y)} labels, loss {loss:.3f}, accuracy {accuracy:.3f}"
         if validation_env is not None and validation_episodes > 0:
             validation_env.seed(validation_seed)
-            validation.append(evaluate(model, validation_env, validation_episodes, deterministic=False).success_rate)
+            validation.append(evaluate(model, validation_env, validation_episodes, deterministic=greedy).success_rate)
             if validation[-1] >= max(validation):  # ties go to the later round, which has seen more labels
                 best = {k: v.clone() for k, v in policy.net.state_dict().items()}
             line += f", validation success {validation[-1]:.2f}"
         if progress:
             progress(line)
     record = {"method": "dagger", "steps": int(len(y)), "seed": seed, "rounds": rounds, "epochs": epochs,
-              "final_epochs": final_epochs}
+              "final_epochs": final_epochs, "learner_actions": learner_actions}
     if validation:
         selected = int(np.flatnonzero(np.asarray(validation) == max(validation))[-1])
         policy.net.load_state_dict(best)

@@ -22,12 +22,15 @@ from stable_baselines3.common.env_util import make_vec_env
 from stable_baselines3.common.logger import CSVOutputFormat, Logger, make_output_format
 
 from sb3_disagree.acer import ACER
+from sb3_disagree.acer.transfer import load_prior_weights, transfer_kwargs
 from sb3_disagree.options import MODES, PriorSet, make_options
 
 DEFAULT_ENV = "sb3_disagree/Apartment-v0"
 # Env seeds of the evaluations, offsets from the run's seed: the training envs use seed .. seed + n_envs - 1.
 EVAL_SEED_OFFSET = 10_000  # the periodic evaluations along a run
 FINAL_EVAL_SEED_OFFSET = 20_000  # the evaluation after a run
+# Kickstarting's distillation: weight 1 on every state, falling linearly to 0 at 50k env steps.
+KICKSTART: dict[str, Any] = dict(distill_coef=1.0, distill_steps=50_000, distill_states="all")
 # ACER on the apartment: images through NatureCNN; a buffer of 50k frames is 0.7 GB of uint8. Rewards scaled
 # by 0.1 (Q in units of the +10 goal / 10): at scale 1 the policy's entropy collapsed by 20k steps and the
 # new policy alone fell back to ~0 success; at 0.1 it trains stably (docs/results.md, "Choosing ACER's scale").
@@ -42,7 +45,9 @@ class RunConfig:
 
     :param goal: The new goal word
     :param env_id: Gymnasium id of the environment
-    :param mode: "disagreement", "room-sensor" or "scratch"
+    :param mode: "disagreement", "room-sensor", "scratch", "finetune" (ACER from the most similar prior's weights,
+        no behaviour) or "kickstart" (the new policy acts alone, distilled toward the priors' mixture on every
+        state with a weight annealed to zero: ``KICKSTART`` unless ``acer_kwargs`` say otherwise)
     :param priors: "auto" (by similarity) or the goal labels of the priors
     :param alpha: Disagreement window
     :param beta: Disagreement threshold (>= 0)
@@ -64,6 +69,8 @@ class RunConfig:
         experiments keep the sequential loop their figures were made with unless a cell asks for it
     :param frame_stack: The new policy sees its last this many observations (its memory; 1: the current one);
         the priors keep their single observation
+    :param jsrl_horizon: Mode "jsrl": the guide's horizon at the start, in steps; 0 for the priors' mean
+        episode length on their zoo cards
     """
 
     goal: str
@@ -85,6 +92,7 @@ class RunConfig:
     vec_env: str = "dummy"
     overlap: bool = False
     frame_stack: int = 1
+    jsrl_horizon: int = 0
 
     def validate(self) -> None:
         if self.mode not in MODES:
@@ -97,6 +105,8 @@ class RunConfig:
             raise ValueError("--steps and --n-envs must be positive")
         if self.vec_env not in ("dummy", "subproc"):
             raise ValueError(f"--vec-env must be dummy or subproc, got {self.vec_env!r}")
+        if self.jsrl_horizon < 0:
+            raise ValueError(f"--jsrl-horizon must be >= 0, got {self.jsrl_horizon}")
         if self.frame_stack < 1:
             raise ValueError(f"--frame-stack must be >= 1, got {self.frame_stack}")
         if self.eval_every < 0 or self.eval_episodes < 1:
@@ -127,6 +137,19 @@ def choose_priors(config: RunConfig, env) -> tuple[list[str], list[float], Prior
         chosen = [(n, sims.get(n, 1.0)) for n in names]
     models = [zoo.load(zoo.get(name, config.env_id), env) for name, _ in chosen]
     return [n for n, _ in chosen], [s for _, s in chosen], PriorSet(models)
+
+
+def guide_horizon(config: RunConfig, prior_names: list[str]) -> int:
+    """The priors' mean episode length on their own goals (their cards' sampled evaluation): where JSRL's guide
+    horizon starts."""
+    from sb3_disagree.zoo import Zoo
+
+    zoo = Zoo(config.zoo)
+    lengths = [zoo.get(name, config.env_id).card.evaluation.get("mean_length") for name in prior_names]
+    lengths = [x for x in lengths if x]
+    if not lengths:
+        raise ValueError("the priors' cards record no evaluation to take JSRL's horizon from; give jsrl_horizon")
+    return max(1, int(round(float(np.mean(lengths)))))
 
 
 class RecordTrajectories(BaseCallback):
@@ -287,12 +310,14 @@ def train(config: RunConfig, out: Path = Path("runs"), resume: Optional[Path] = 
     run_dir = Path(resume or run_dir or config.run_dir(Path(out)))
     run_dir.mkdir(parents=True, exist_ok=True)
     env = build_env(config, run_dir, append=resume is not None)
-    behaviour, prior_names, sims = None, [], []
+    behaviour, prior_names, sims, priors = None, [], [], None
     if config.mode != "scratch":
         prior_names, sims, priors = choose_priors(config, env)
         if on_priors:
             on_priors(prior_names, sims)
-        behaviour = make_options(config.mode, priors, config.alpha, config.beta, config.entropy_offset, seed=config.seed)
+        horizon = config.jsrl_horizon or guide_horizon(config, prior_names) if config.mode == "jsrl" else 0
+        behaviour = make_options(config.mode, priors, config.alpha, config.beta, config.entropy_offset,
+                                 seed=config.seed, horizon=horizon)
     saved_config = dict(asdict(config), chosen_priors=prior_names, similarities=sims)
     if resume is not None:
         model = ACER.load(run_dir / "model.zip", env=env, behaviour=behaviour, overlap=config.overlap)
@@ -302,9 +327,17 @@ def train(config: RunConfig, out: Path = Path("runs"), resume: Optional[Path] = 
     else:
         policy = "CnnPolicy" if len(env.observation_space.shape) == 3 else "MlpPolicy"
         acer_kwargs = dict(config.acer_kwargs)
+        if config.mode == "kickstart":
+            acer_kwargs = {**KICKSTART, **acer_kwargs}
+        policy_kwargs = dict(acer_kwargs.pop("policy_kwargs", {}))
+        if config.mode == "finetune":  # the most similar prior's architecture, and below its weights
+            policy_kwargs.update(transfer_kwargs(priors.priors[0].policy))
         if config.frame_stack > 1:
-            acer_kwargs["policy_kwargs"] = {**acer_kwargs.get("policy_kwargs", {}), "frame_stack": config.frame_stack}
-        model = ACER(policy, env, seed=config.seed, behaviour=behaviour, overlap=config.overlap, **acer_kwargs)
+            policy_kwargs["frame_stack"] = config.frame_stack
+        model = ACER(policy, env, seed=config.seed, behaviour=behaviour, overlap=config.overlap,
+                     policy_kwargs=policy_kwargs, **acer_kwargs)
+        if config.mode == "finetune":
+            load_prior_weights(model.policy, priors.priors[0].policy)
         remaining = config.steps
         (run_dir / "config.yaml").write_text(yaml.safe_dump(saved_config, sort_keys=False))
     model.set_logger(run_logger(run_dir, append=resume is not None))

@@ -113,3 +113,28 @@ def test_entropy_weight_schedules():
         as_schedule("exp_0.1")
     with pytest.raises(ValueError, match="distill_states"):
         ACER("MlpPolicy", make_vec_env(CueEnv, n_envs=1), distill_states="some")
+
+
+@pytest.mark.parametrize("policy, env_class", [("MlpPolicy", CueEnv), ("CnnPolicy", ImageEnv)])
+def test_a_policy_started_from_a_prior_acts_as_the_prior_whatever_its_older_frames(policy, env_class):
+    from sb3_disagree.acer.transfer import load_prior_weights, transfer_kwargs
+
+    env = make_vec_env(env_class, n_envs=2, seed=0)
+    prior = ACER(policy, env, n_steps=4, seed=1)
+    prior.learn(64)  # weights away from their initialisation
+    model = ACER(policy, env, seed=2, policy_kwargs=dict(frame_stack=3, **transfer_kwargs(prior.policy)))
+    copied = load_prior_weights(model.policy, prior.policy)
+    assert copied and not any(name.startswith("q_net") for name in copied)
+    obs = th.as_tensor(prior.policy.obs_to_tensor(np.stack([env.observation_space.sample() for _ in range(5)]))[0])
+    older = th.as_tensor(np.stack([np.concatenate([env.observation_space.sample()] * 2, axis=-1 if policy == "MlpPolicy"
+                                                  else 2) for _ in range(5)]))
+    if policy == "CnnPolicy":
+        older = older.permute(0, 3, 1, 2)
+    stacked = th.cat([older.to(obs.dtype), obs], dim=1)
+    with th.no_grad():
+        assert th.allclose(model.policy.action_probs(stacked), prior.policy.action_probs(obs), atol=1e-6)
+        # The average network starts at the copied weights.
+        prior_logits = prior.policy.net.logits(prior.policy.extract_features(obs, prior.policy.net.features_extractor))
+        assert th.allclose(model.policy.average_logits(stacked), prior_logits, atol=1e-5)
+        # The Q head is the new policy's own.
+        assert not th.allclose(model.policy.net.q_net.weight, prior.policy.net.q_net.weight)

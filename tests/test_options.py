@@ -201,3 +201,52 @@ def test_prior_probabilities_equal_each_policys_own_distribution():
         with th.no_grad():
             expected = prior.policy.get_distribution(prior.policy.obs_to_tensor(obs)[0]).distribution.probs
         assert th.equal(got[i], expected), i
+
+
+def _empirical(steps, n_actions=A):
+    """Per step: the frequency of each action over the batch of envs."""
+    return [np.bincount(np.asarray(s.actions), minlength=n_actions) / len(s.actions) for s in steps]
+
+
+def test_jump_start_guides_the_first_h_steps_with_an_exact_mu():
+    from collections import deque
+
+    from sb3_disagree.options import JumpStart
+
+    n = 3000
+    prior_probs = _priors(DISAGREE, n)
+    pi = th.tensor([[0.1, 0.2, 0.7]]).expand(n, A)
+    model = SimpleNamespace(n_envs=n, device=th.device("cpu"), ep_success_buffer=deque(maxlen=100))
+    b = JumpStart(FakePriors(prior_probs), horizon=3, stages=3, window=5)
+    b.setup(model)
+    starts = np.ones(n, dtype=bool)
+    steps = []
+    for _ in range(5):
+        steps.append(b(None, pi, [{}] * n, starts))
+        starts = np.zeros(n, dtype=bool)
+    mix = prior_probs.mean(0)[0]
+    for t, (step, freq) in enumerate(zip(steps, _empirical(steps))):
+        expected = mix if t < 3 else pi[0]
+        assert th.allclose(step.mu, expected.expand(n, A)) and (step.tags == ("prior" if t < 3 else "explore")).all()
+        assert np.allclose(freq, expected.numpy(), atol=0.03), (t, freq)  # the actions are draws from mu
+        assert th.allclose(step.teacher, mix.expand(n, A)) and step.followed.mean() == (t < 3)
+    # The curriculum: after `window` ended episodes whose success is within tolerance of the best, h steps down.
+    model.ep_success_buffer.extend([1.0] * 5)
+    b.ended = 0
+    b(None, pi, [{}] * n, np.ones(n, dtype=bool))  # n episodes end here
+    assert b.stage == 1 and b.h == 2
+    model.ep_success_buffer.extend([0.0] * 5)  # success fell far below the best: no advance
+    b(None, pi, [{}] * n, np.ones(n, dtype=bool))
+    assert b.stage == 1
+
+
+def test_prior_teacher_acts_with_the_policy_and_offers_the_priors_mixture():
+    from sb3_disagree.options import PriorTeacher
+
+    n = 3000
+    prior_probs = _priors(AGREE, n)
+    pi = th.tensor([[0.2, 0.5, 0.3]]).expand(n, A)
+    b = _setup(PriorTeacher(FakePriors(prior_probs)), n)
+    step = b(None, pi, [{}] * n, np.ones(n, dtype=bool))
+    assert th.allclose(step.mu, pi) and np.allclose(_empirical([step])[0], pi[0].numpy(), atol=0.03)
+    assert th.allclose(step.teacher, prior_probs.mean(0)) and not step.followed.any()

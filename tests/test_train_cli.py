@@ -31,7 +31,7 @@ def _train_args(zoo, out, *extra):
             "--n-envs", "2", *extra]
 
 
-@pytest.mark.parametrize("mode", ["disagreement", "room-sensor", "scratch"])
+@pytest.mark.parametrize("mode", ["disagreement", "room-sensor", "scratch", "finetune", "kickstart", "jsrl"])
 def test_train_writes_the_run_folder(zoo, tmp_path, mode):
     result = runner.invoke(app, _train_args(zoo, tmp_path, "--mode", mode))
     assert result.exit_code == 0, result.output
@@ -41,11 +41,16 @@ def test_train_writes_the_run_folder(zoo, tmp_path, mode):
     assert list((run / "monitor").glob("*.monitor.csv")) and list(run.glob("events.out.tfevents*"))
     cfg = yaml.safe_load((run / "config.yaml").read_text())
     assert cfg["finished"] and cfg["num_timesteps"] >= 400
-    if mode != "scratch":
+    if mode == "finetune":  # started from the nearest prior: its policy head, a Q head of its own
+        prior = ACER.load(zoo / "sb3_disagree__ApartmentState-v0" / "shower" / "model.zip")
+        assert ACER.load(run / "model.zip").policy.net_arch == prior.policy.net_arch
+    if mode not in ("scratch", "finetune"):
         assert "priors: shower" in result.output and cfg["chosen_priors"] == ["shower", "toilet"]
         header = (run / "progress.csv").read_text().splitlines()[0]
-        assert "prior/usage" in header and "behaviour/" in header
+        assert ("prior/usage" in header) == (mode != "kickstart") and "behaviour/" in header
         assert ("prior/disagreement" in header) == (mode == "disagreement")
+        assert ("train/distill_loss" in header) == (mode == "kickstart")
+        assert ("jsrl/horizon" in header) == (mode == "jsrl")
     # The trained model opens with plain SB3 tools, no priors or zoo needed.
     model = ACER.load(run / "model.zip")
     env = make_vec_env(STATE_ID, n_envs=1, env_kwargs=dict(goal="bathtub"))
