@@ -34,7 +34,8 @@ class LiveDisplay(BaseCallback):
 
     def table(self, now: float) -> Table:
         m = self.model
-        stats = getattr(m.behaviour, "last", {}) if m.behaviour is not None else {}
+        behaviour = getattr(m, "behaviour", None)
+        stats = getattr(behaviour, "last", {}) if behaviour is not None else {}
         success = m.ep_success_buffer
         t = Table(show_header=False, box=None)
         t.add_row("steps", f"{m.num_timesteps:,} / {self.total:,}")
@@ -49,7 +50,7 @@ def train(
     goal: str = typer.Option(..., "--goal", help="The new goal word."),
     env: str = typer.Option(DEFAULT_ENV, "--env", help="Gymnasium id of the environment."),
     mode: str = typer.Option("disagreement", "--mode", help="disagreement, room-sensor, scratch, finetune (start "
-                             "from the nearest prior), kickstart (distil the priors) or jsrl (Jump-Start RL)."),
+                             "from the nearest prior), kickstart (distil the priors), jsrl (Jump-Start RL) or ppo (SB3's PPO)."),
     priors: str = typer.Option("auto", "--priors", help="auto (by similarity), or goals: a,b"),
     alpha: int = typer.Option(10, "--alpha", help="Disagreement window."),
     beta: float = typer.Option(0.1, "--beta", help="Follow priors while the window's mean disagreement is below this."),
@@ -122,8 +123,7 @@ def eval_run(
     with clean_errors():
         import yaml
 
-        from sb3_disagree.acer import ACER
-        from sb3_disagree.training import evaluate_alone
+        from sb3_disagree.training import algorithm_of, evaluate_alone
 
         path = Path(run_or_model)
         run_dir = path if path.is_dir() else path.parent
@@ -134,7 +134,7 @@ def eval_run(
         if not cfg_path.exists():
             raise FileNotFoundError(f"{cfg_path} is missing: it names the environment and goal to evaluate in")
         cfg = yaml.safe_load(cfg_path.read_text())
-        model = ACER.load(model_path, device="cpu")
+        model = algorithm_of(cfg.get("mode", "disagreement")).load(model_path, device="cpu")
         for greedy in (True, False) if deterministic is None else (deterministic,):
             result = evaluate_alone(model, cfg, episodes, greedy, seed)
             console.print(f"{cfg['goal']}: success {result.success_rate:.2f}, mean length {result.mean_length:.1f}, "

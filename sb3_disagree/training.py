@@ -31,6 +31,10 @@ EVAL_SEED_OFFSET = 10_000  # the periodic evaluations along a run
 FINAL_EVAL_SEED_OFFSET = 20_000  # the evaluation after a run
 # Kickstarting's distillation: weight 1 on every state, falling linearly to 0 at 50k env steps.
 KICKSTART: dict[str, Any] = dict(distill_coef=1.0, distill_steps=50_000, distill_states="all")
+# SB3's PPO for the "ppo" mode: rl-zoo3's Atari settings with the runs' 4 envs (benchmarks/hyperparams/ppo.yml);
+# learning rate and clip range fall linearly to 0 over the budget, as rl-zoo3's "lin_" values.
+PPO_KWARGS: dict[str, Any] = dict(n_steps=128, n_epochs=4, batch_size=256, learning_rate=2.5e-4, clip_range=0.1,
+                                  ent_coef=0.01, vf_coef=0.5)
 # ACER on the apartment: images through NatureCNN; a buffer of 50k frames is 0.7 GB of uint8. Rewards scaled
 # by 0.1 (Q in units of the +10 goal / 10): at scale 1 the policy's entropy collapsed by 20k steps and the
 # new policy alone fell back to ~0 success; at 0.1 it trains stably (docs/results.md, "Choosing ACER's scale").
@@ -46,8 +50,10 @@ class RunConfig:
     :param goal: The new goal word
     :param env_id: Gymnasium id of the environment
     :param mode: "disagreement", "room-sensor", "scratch", "finetune" (ACER from the most similar prior's weights,
-        no behaviour) or "kickstart" (the new policy acts alone, distilled toward the priors' mixture on every
-        state with a weight annealed to zero: ``KICKSTART`` unless ``acer_kwargs`` say otherwise)
+        no behaviour), "kickstart" (the new policy acts alone, distilled toward the priors' mixture on every
+        state with a weight annealed to zero: ``KICKSTART`` unless ``acer_kwargs`` say otherwise), "jsrl"
+        (Jump-Start RL: the priors guide each episode's first steps, fewer as the new policy succeeds) or
+        "ppo" (SB3's PPO from scratch, ``PPO_KWARGS``)
     :param priors: "auto" (by similarity) or the goal labels of the priors
     :param alpha: Disagreement window
     :param beta: Disagreement threshold (>= 0)
@@ -109,6 +115,8 @@ class RunConfig:
             raise ValueError(f"--jsrl-horizon must be >= 0, got {self.jsrl_horizon}")
         if self.frame_stack < 1:
             raise ValueError(f"--frame-stack must be >= 1, got {self.frame_stack}")
+        if self.frame_stack > 1 and self.mode == "ppo":
+            raise ValueError("--frame-stack is an ACER policy's memory; --mode ppo trains SB3's PPO without it")
         if self.eval_every < 0 or self.eval_episodes < 1:
             raise ValueError("--eval-every must be >= 0 and --eval-episodes positive")
 
@@ -137,6 +145,41 @@ def choose_priors(config: RunConfig, env) -> tuple[list[str], list[float], Prior
         chosen = [(n, sims.get(n, 1.0)) for n in names]
     models = [zoo.load(zoo.get(name, config.env_id), env) for name, _ in chosen]
     return [n for n, _ in chosen], [s for _, s in chosen], PriorSet(models)
+
+
+def algorithm_of(mode: str) -> type:
+    """The SB3 algorithm class a mode trains: PPO for "ppo", ACER for every other."""
+    if mode == "ppo":
+        from stable_baselines3 import PPO
+
+        return PPO
+    return ACER
+
+
+def new_model(config: RunConfig, env, behaviour, priors: Optional[PriorSet]):
+    """The model a new run trains: ACER with the run's settings (from a prior's weights for "finetune", with
+    kickstarting's distillation for "kickstart"), or SB3's PPO with ``PPO_KWARGS`` for "ppo"."""
+    policy = "CnnPolicy" if len(env.observation_space.shape) == 3 else "MlpPolicy"
+    if config.mode == "ppo":
+        from stable_baselines3 import PPO
+
+        kwargs = dict(PPO_KWARGS)
+        lr, clip = kwargs.pop("learning_rate"), kwargs.pop("clip_range")
+        return PPO(policy, env, seed=config.seed, learning_rate=lambda p: p * lr, clip_range=lambda p: p * clip,
+                   **kwargs)
+    acer_kwargs = dict(config.acer_kwargs)
+    if config.mode == "kickstart":
+        acer_kwargs = {**KICKSTART, **acer_kwargs}
+    policy_kwargs = dict(acer_kwargs.pop("policy_kwargs", {}))
+    if config.mode == "finetune":  # the most similar prior's architecture, and below its weights
+        policy_kwargs.update(transfer_kwargs(priors.priors[0].policy))
+    if config.frame_stack > 1:
+        policy_kwargs["frame_stack"] = config.frame_stack
+    model = ACER(policy, env, seed=config.seed, behaviour=behaviour, overlap=config.overlap,
+                 policy_kwargs=policy_kwargs, **acer_kwargs)
+    if config.mode == "finetune":
+        load_prior_weights(model.policy, priors.priors[0].policy)
+    return model
 
 
 def guide_horizon(config: RunConfig, prior_names: list[str]) -> int:
@@ -311,7 +354,7 @@ def train(config: RunConfig, out: Path = Path("runs"), resume: Optional[Path] = 
     run_dir.mkdir(parents=True, exist_ok=True)
     env = build_env(config, run_dir, append=resume is not None)
     behaviour, prior_names, sims, priors = None, [], [], None
-    if config.mode != "scratch":
+    if config.mode not in ("scratch", "ppo"):
         prior_names, sims, priors = choose_priors(config, env)
         if on_priors:
             on_priors(prior_names, sims)
@@ -320,24 +363,15 @@ def train(config: RunConfig, out: Path = Path("runs"), resume: Optional[Path] = 
                                  seed=config.seed, horizon=horizon)
     saved_config = dict(asdict(config), chosen_priors=prior_names, similarities=sims)
     if resume is not None:
-        model = ACER.load(run_dir / "model.zip", env=env, behaviour=behaviour, overlap=config.overlap)
-        if (run_dir / "replay_buffer.pkl").exists():
+        if config.mode == "ppo":
+            model = algorithm_of(config.mode).load(run_dir / "model.zip", env=env)
+        else:
+            model = ACER.load(run_dir / "model.zip", env=env, behaviour=behaviour, overlap=config.overlap)
+        if (run_dir / "replay_buffer.pkl").exists() and isinstance(model, ACER):
             model.load_replay_buffer(run_dir / "replay_buffer.pkl")
         remaining = max(config.steps - model.num_timesteps, 0)
     else:
-        policy = "CnnPolicy" if len(env.observation_space.shape) == 3 else "MlpPolicy"
-        acer_kwargs = dict(config.acer_kwargs)
-        if config.mode == "kickstart":
-            acer_kwargs = {**KICKSTART, **acer_kwargs}
-        policy_kwargs = dict(acer_kwargs.pop("policy_kwargs", {}))
-        if config.mode == "finetune":  # the most similar prior's architecture, and below its weights
-            policy_kwargs.update(transfer_kwargs(priors.priors[0].policy))
-        if config.frame_stack > 1:
-            policy_kwargs["frame_stack"] = config.frame_stack
-        model = ACER(policy, env, seed=config.seed, behaviour=behaviour, overlap=config.overlap,
-                     policy_kwargs=policy_kwargs, **acer_kwargs)
-        if config.mode == "finetune":
-            load_prior_weights(model.policy, priors.priors[0].policy)
+        model = new_model(config, env, behaviour, priors)
         remaining = config.steps
         (run_dir / "config.yaml").write_text(yaml.safe_dump(saved_config, sort_keys=False))
     model.set_logger(run_logger(run_dir, append=resume is not None))
@@ -351,7 +385,7 @@ def train(config: RunConfig, out: Path = Path("runs"), resume: Optional[Path] = 
     except KeyboardInterrupt:
         finished = False
     model.save(run_dir / "model.zip")
-    if not finished:
+    if not finished and isinstance(model, ACER):
         model.save_replay_buffer(run_dir / "replay_buffer.pkl")
     elif (run_dir / "replay_buffer.pkl").exists():
         os.remove(run_dir / "replay_buffer.pkl")

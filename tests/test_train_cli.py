@@ -31,7 +31,7 @@ def _train_args(zoo, out, *extra):
             "--n-envs", "2", *extra]
 
 
-@pytest.mark.parametrize("mode", ["disagreement", "room-sensor", "scratch", "finetune", "kickstart", "jsrl"])
+@pytest.mark.parametrize("mode", ["disagreement", "room-sensor", "scratch", "finetune", "kickstart", "jsrl", "ppo"])
 def test_train_writes_the_run_folder(zoo, tmp_path, mode):
     result = runner.invoke(app, _train_args(zoo, tmp_path, "--mode", mode))
     assert result.exit_code == 0, result.output
@@ -44,7 +44,7 @@ def test_train_writes_the_run_folder(zoo, tmp_path, mode):
     if mode == "finetune":  # started from the nearest prior: its policy head, a Q head of its own
         prior = ACER.load(zoo / "sb3_disagree__ApartmentState-v0" / "shower" / "model.zip")
         assert ACER.load(run / "model.zip").policy.net_arch == prior.policy.net_arch
-    if mode not in ("scratch", "finetune"):
+    if mode not in ("scratch", "finetune", "ppo"):
         assert "priors: shower" in result.output and cfg["chosen_priors"] == ["shower", "toilet"]
         header = (run / "progress.csv").read_text().splitlines()[0]
         assert ("prior/usage" in header) == (mode != "kickstart") and "behaviour/" in header
@@ -52,7 +52,9 @@ def test_train_writes_the_run_folder(zoo, tmp_path, mode):
         assert ("train/distill_loss" in header) == (mode == "kickstart")
         assert ("jsrl/horizon" in header) == (mode == "jsrl")
     # The trained model opens with plain SB3 tools, no priors or zoo needed.
-    model = ACER.load(run / "model.zip")
+    from sb3_disagree.training import algorithm_of
+
+    model = algorithm_of(mode).load(run / "model.zip")
     env = make_vec_env(STATE_ID, n_envs=1, env_kwargs=dict(goal="bathtub"))
     evaluate_policy(model, env, n_eval_episodes=1)
 
@@ -199,3 +201,17 @@ def test_unknown_goal_word_and_too_few_priors(zoo, tmp_path):
     assert result.exit_code == 2 and "2 priors are needed" in result.output
     result = runner.invoke(app, ["train", "--goal", "bathtub", "--resume", str(tmp_path / "nothing")])
     assert result.exit_code == 2 and "not a run folder" in result.output
+
+
+def test_the_ppo_modes_settings_are_the_published_hyperparameters_file():
+    from pathlib import Path
+
+    from sb3_disagree.training import PPO_KWARGS
+
+    published = yaml.safe_load((Path(__file__).parents[1] / "benchmarks/hyperparams/ppo.yml").read_text())
+    entry = dict(published["sb3_disagree/Apartment-v0"])
+    assert entry.pop("n_envs") == RunConfig(goal="x").n_envs and entry.pop("policy") == "CnnPolicy"
+    entry.pop("n_timesteps")
+    for key in ("learning_rate", "clip_range"):
+        entry[key] = float(entry[key].removeprefix("lin_"))
+    assert entry == PPO_KWARGS

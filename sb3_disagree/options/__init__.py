@@ -11,9 +11,9 @@ from sb3_disagree.options.priors import PriorSet
 from sb3_disagree.options.room_sensor import RoomSensorOptions
 from sb3_disagree.options.teacher import PriorTeacher
 
-MODES = ("disagreement", "room-sensor", "scratch", "finetune", "kickstart", "jsrl")
+MODES = ("disagreement", "room-sensor", "scratch", "finetune", "kickstart", "jsrl", "ppo")
 # Modes whose new policy acts alone while it learns (no priors in the behaviour).
-ALONE = ("scratch", "finetune")
+ALONE = ("scratch", "finetune", "ppo")
 
 
 def make_options(mode: str, priors: PriorSet, alpha: int = 10, beta: float = 0.1, entropy_offset: float = 0.1,
