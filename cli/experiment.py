@@ -67,11 +67,16 @@ def run(
                       f"({backend}) -> {root}")
 
         def show(result: dict) -> None:
+            greedy = result.get("final_alone_greedy", {}).get("success_rate")
             console.print(f"  {result['cell']} seed {result['seed']}: {result['steps']:,} steps in "
-                          f"{result['seconds']:.0f} s; the new policy alone {result['final_alone']['success_rate']:.2f}"
+                          f"{result['seconds']:.0f} s; the new policy alone "
+                          + (f"{greedy:.2f} greedy, " if greedy is not None else "")
+                          + f"{result['final_alone']['success_rate']:.2f} sampled"
                           + (f" (copied from {result['copied_from']})" if "copied_from" in result else ""))
 
-        run_experiment(experiment, root, backend=backend, jobs=jobs, address=address, on_result=show)
+        # Where no live display can draw (a log file, a scheduler), each run prints plain progress lines.
+        run_experiment(experiment, root, backend=backend, jobs=jobs, address=address, on_result=show,
+                       progress_every=None if console.is_terminal else 60.0)
 
 
 @app.command("report")

@@ -73,6 +73,8 @@ def train(
     jsrl_horizon: int = typer.Option(0, "--jsrl-horizon", help="jsrl: the guide's first horizon in steps (0: the "
                                      "priors' mean episode length on their cards)."),
     out: Path = typer.Option(Path("runs"), "--out", help="Root folder of the runs."),
+    progress_every: float = typer.Option(30.0, "--progress-every", help="Seconds between progress lines when the "
+                                         "output is not a terminal."),
     resume: Optional[Path] = typer.Option(None, "--resume", help="A run folder to continue."),
 ) -> None:
     """Train a policy for a new goal with disagreement options (or the room sensor, or from scratch)."""
@@ -91,11 +93,16 @@ def train(
         def show_priors(names, sims):
             console.print("priors: " + ", ".join(f"[bold]{n}[/] (similarity {s:.3f})" for n, s in zip(names, sims)))
 
-        with Live(console=console, refresh_per_second=2, transient=False) as live:
-            display = LiveDisplay(live)
-            run_dir, model, finished = run(config, out, resume=resume, callbacks=[display], on_priors=show_priors,
-                                           steps=steps if resume is not None else None)
-            live.update(display.table(time.perf_counter()))
+        kwargs = dict(resume=resume, on_priors=show_priors, steps=steps if resume is not None else None)
+        if console.is_terminal:
+            with Live(console=console, refresh_per_second=2, transient=False) as live:
+                display = LiveDisplay(live)
+                run_dir, model, finished = run(config, out, callbacks=[display], **kwargs)
+                live.update(display.table(time.perf_counter()))
+        else:  # a log file, a pipe, a batch scheduler: plain lines at a fixed interval
+            from sb3_disagree.callbacks import ProgressLines
+
+            run_dir, model, finished = run(config, out, callbacks=[ProgressLines(progress_every)], **kwargs)
         if (run_dir / "evaluations.npz").exists():
             import numpy as np
 

@@ -215,3 +215,12 @@ def test_the_ppo_modes_settings_are_the_published_hyperparameters_file():
     for key in ("learning_rate", "clip_range"):
         entry[key] = float(entry[key].removeprefix("lin_"))
     assert entry == PPO_KWARGS
+
+
+def test_a_run_whose_output_is_not_a_terminal_prints_plain_progress_lines(zoo, tmp_path):
+    result = runner.invoke(app, _train_args(zoo, tmp_path, "--progress-every", "0"))
+    assert result.exit_code == 0, result.output
+    lines = [line for line in result.output.splitlines() if line.startswith("steps ")]
+    assert len(lines) >= 2 and lines[-1].startswith("steps 400/400 | ")
+    assert all("env steps/s" in line and "spent" in line for line in lines)
+    assert "prior usage" in lines[-1] and "success" in lines[-1]

@@ -1,23 +1,11 @@
-"""Environments: the apartment (MiniWorld RGB and a state variant) and its scripted expert."""
+"""
+Environments: the apartment (MiniWorld RGB and a state variant), the office scan, and their scripted expert.
 
-import os
+Importing this package registers them with Gymnasium (``import sb3_disagree`` does it too); nothing
+imports MiniWorld, pyglet or OpenGL until an RGB environment draws its first frame.
+"""
 
 from gymnasium.envs.registration import register, registry
-
-
-def _arrange_headless_pyglet() -> None:
-    """MiniWorld draws through pyglet: without a display, pyglet must use its headless (EGL) mode,
-    set before anything imports miniworld."""
-    if os.environ.get("DISPLAY") or "PYGLET_HEADLESS" in os.environ:
-        return
-    import pyglet
-
-    pyglet.options["headless"] = True
-
-
-_arrange_headless_pyglet()
-# llvmpipe renders 60x80 frames faster on one thread than it splits them.
-os.environ.setdefault("LP_NUM_THREADS", "0")
 
 APARTMENT_ID = "sb3_disagree/Apartment-v0"
 APARTMENT_STATE_ID = "sb3_disagree/ApartmentState-v0"

@@ -87,6 +87,9 @@ class MeshRenderer:
     def __init__(self, meshes: list[trimesh.Trimesh], width: int = 80, height: int = 60, hfov: float = 90.0,
                  camera_height: float = 1.25, floor_y: float = 0.0, background: tuple[float, float, float] = (0.6, 0.7, 0.8)
                  ) -> None:
+        from sb3_disagree.envs.headless import arrange_headless
+
+        arrange_headless()
         import moderngl
 
         self.width, self.height = width, height

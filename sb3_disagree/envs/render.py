@@ -1,18 +1,21 @@
 """
 MiniWorld as the apartment's renderer: the scene is built once, then drawn from any agent pose.
 
-Importing this module imports MiniWorld; :mod:`sb3_disagree.envs` arranges pyglet's headless mode
-before that when there is no display.
+Importing this module imports MiniWorld, after arranging pyglet's headless mode where there is no display.
 """
 
 import contextlib
 import io
 
 import numpy as np
-from miniworld.entity import COLORS, Box
-from miniworld.miniworld import MiniWorldEnv
 
-from sb3_disagree.envs.layout import EXTRA_COLORS, Layout
+from sb3_disagree.envs.headless import arrange_headless
+
+arrange_headless()
+from miniworld.entity import COLORS, Box  # noqa: E402
+from miniworld.miniworld import MiniWorldEnv  # noqa: E402
+
+from sb3_disagree.envs.layout import EXTRA_COLORS, Layout  # noqa: E402
 
 for _name, _rgb in EXTRA_COLORS.items():
     COLORS.setdefault(_name, np.array(_rgb))

@@ -48,11 +48,13 @@ def copy_run(run: Run, source: Path, folder: Path) -> dict[str, Any]:
     return result
 
 
-def train_and_evaluate(run: Run, folder: Path, source: Optional[Path] = None) -> dict[str, Any]:
+def train_and_evaluate(run: Run, folder: Path, source: Optional[Path] = None,
+                       progress_every: Optional[float] = None) -> dict[str, Any]:
     """
     Train one run into ``folder``, evaluate the new policy alone, and write ``result.json``.
 
     :param source: A finished run to continue to ``run.config.steps`` instead of starting afresh
+    :param progress_every: Print a progress line (prefixed with the cell and seed) every this many seconds
     :return: The result record
     """
     import torch as th
@@ -64,10 +66,15 @@ def train_and_evaluate(run: Run, folder: Path, source: Optional[Path] = None) ->
 
     begun = _start_from(source, folder) if source is not None else 0
     start = time.perf_counter()
+    callbacks = []
+    if progress_every:
+        from sb3_disagree.callbacks import ProgressLines
+
+        callbacks.append(ProgressLines(progress_every, prefix=f"  {run.cell} seed {run.seed}: "))
     if source is not None:
-        run_dir, model, finished = train(run.config, resume=folder, steps=run.config.steps)
+        run_dir, model, finished = train(run.config, resume=folder, steps=run.config.steps, callbacks=callbacks)
     else:
-        run_dir, model, finished = train(run.config, run_dir=folder)
+        run_dir, model, finished = train(run.config, run_dir=folder, callbacks=callbacks)
     if not finished:
         raise KeyboardInterrupt
     seconds = time.perf_counter() - start
@@ -111,6 +118,7 @@ def run_experiment(
     jobs: Optional[int] = None,
     address: Optional[str] = None,
     on_result: Optional[Callable[[dict[str, Any]], None]] = None,
+    progress_every: Optional[float] = None,
 ) -> list[dict[str, Any]]:
     """
     Run every unfinished (cell, seed) of an experiment.
@@ -121,6 +129,7 @@ def run_experiment(
     :param jobs: Runs at a time on the local backend (default: the machine's cores)
     :param address: The Ray cluster's address ("auto", "ray://host:10001"); None starts a local Ray
     :param on_result: Called with each run's result as it arrives
+    :param progress_every: Each local run prints a progress line every this many seconds (None: silent)
     :return: The results of the runs done now
     """
     if backend not in BACKENDS:
@@ -155,10 +164,10 @@ def run_experiment(
             done(result)
     elif (jobs or os.cpu_count() or 1) == 1:
         for r, source in todo:
-            done(train_and_evaluate(r, r.folder(root), source))
+            done(train_and_evaluate(r, r.folder(root), source, progress_every))
     else:
         with ProcessPoolExecutor(jobs or os.cpu_count()) as pool:
-            futures = [pool.submit(train_and_evaluate, r, r.folder(root), source) for r, source in todo]
+            futures = [pool.submit(train_and_evaluate, r, r.folder(root), source, progress_every) for r, source in todo]
             for future in as_completed(futures):
                 done(future.result())
     return results
