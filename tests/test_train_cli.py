@@ -147,7 +147,7 @@ def test_interrupt_saves_and_resume_continues_the_step_count(zoo, tmp_path):
     result = runner.invoke(app, ["train", "--goal", "bathtub", "--resume", str(run), "--steps", "1000"])
     assert result.exit_code == 0, result.output
     cfg = yaml.safe_load((run / "config.yaml").read_text())
-    assert cfg["steps"] == 1000 and 1000 <= cfg["num_timesteps"] < 1100 and "/ 1,000" in result.output
+    assert cfg["steps"] == 1000 and 1000 <= cfg["num_timesteps"] < 1100 and "/1,000 | " in result.output
 
 
 def test_resumed_run_appends_to_its_history(zoo, tmp_path):
