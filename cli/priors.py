@@ -85,18 +85,32 @@ def show(goal: str, env: str = ENV_OPT, zoo: Optional[Path] = ZOO_OPT) -> None:
 @app.command()
 def add(
     model: Path = typer.Argument(..., help="An SB3 model file (ACER, PPO, A2C, TRPO, MaskablePPO)."),
-    goal: str = typer.Option(..., "--goal", help="The goal it reaches."),
+    goal: Optional[str] = typer.Option(None, "--goal", help="The goal it reaches [default: the goal on the model "
+                                       "card (README.md) beside the model]."),
     env: str = ENV_OPT,
     episodes: int = typer.Option(100, "--episodes", help="Evaluation episodes for the card (0: none)."),
     replace: bool = typer.Option(False, "--replace", help="Replace an existing prior for this goal."),
     zoo: Optional[Path] = ZOO_OPT,
 ) -> None:
-    """Add a saved model to the zoo, evaluated and with its card."""
+    """Add a saved model to the zoo, evaluated and with its card; a model card beside the model (as dopt train
+    writes) gives the goal and how the model was trained."""
     with clean_errors():
+        from sb3_disagree.model_card import CARD_NAME, read_model_card
+
         if not model.exists():
             raise FileNotFoundError(f"{model} does not exist")
+        run = read_model_card(model.parent / CARD_NAME).get("sb3_disagree") or {}
+        if goal is None:
+            if not run.get("goal"):
+                raise ValueError(f"--goal is needed: no model card with a goal beside {model}")
+            goal = str(run["goal"])
+        if run.get("env_id") and run["env_id"] != env:
+            raise ValueError(f"the model card beside {model} says it was trained in {run['env_id']}, not {env}; "
+                             f"pass --env {run['env_id']}")
+        training = {"method": "external", **({"model_card": {k: run.get(k) for k in ("mode", "steps", "seed", "command",
+                                                                                    "priors")}} if run else {})}
         z = _zoo(zoo)
-        entry = z.add(model, goal, env, training={"method": "external"}, command=command_line(), replace=replace)
+        entry = z.add(model, goal, env, training=training, command=command_line(), replace=replace)
         if episodes:
             _evaluate_into_card(z, entry, episodes)
         console.print(f"added {goal!r} to {z.root}")

@@ -10,7 +10,7 @@ from rich.live import Live
 from rich.table import Table
 from stable_baselines3.common.callbacks import BaseCallback
 
-from sb3_disagree.cli.common import DEFAULT_ENV, clean_errors, console
+from sb3_disagree.cli.common import DEFAULT_ENV, clean_errors, command_line, console
 
 
 class LiveDisplay(BaseCallback):
@@ -73,13 +73,15 @@ def train(
     jsrl_horizon: int = typer.Option(0, "--jsrl-horizon", help="jsrl: the guide's first horizon in steps (0: the "
                                      "priors' mean episode length on their cards)."),
     out: Path = typer.Option(Path("runs"), "--out", help="Root folder of the runs."),
+    card_episodes: int = typer.Option(20, "--card-episodes", help="Episodes each way (greedy, sampled) of the "
+                                      "evaluation on the model card written beside model.zip (0: none)."),
     progress_every: float = typer.Option(30.0, "--progress-every", help="Seconds between progress lines when the "
                                          "output is not a terminal."),
     resume: Optional[Path] = typer.Option(None, "--resume", help="A run folder to continue."),
 ) -> None:
     """Train a policy for a new goal with disagreement options (or the room sensor, or from scratch)."""
     with clean_errors():
-        from sb3_disagree.training import RunConfig, train as run
+        from sb3_disagree.training import RunConfig, train as run, write_card
 
         config = RunConfig(goal=goal, env_id=env, mode=mode,
                            priors="auto" if priors == "auto" else [p.strip() for p in priors.split(",") if p.strip()],
@@ -103,6 +105,12 @@ def train(
             from sb3_disagree.callbacks import ProgressLines
 
             run_dir, model, finished = run(config, out, callbacks=[ProgressLines(progress_every)], **kwargs)
+        if card_episodes and finished:
+            console.print(f"evaluating the new policy alone for its card ({card_episodes} episodes each way)")
+        evaluations = write_card(run_dir, model, card_episodes if finished else 0, command_line())
+        for label, result in evaluations.items():
+            console.print(f"the new policy alone, {label}: success {result.success_rate:.2f}, mean length "
+                          f"{result.mean_length:.1f} over {result.episodes} episodes")
         if (run_dir / "evaluations.npz").exists():
             import numpy as np
 

@@ -395,6 +395,23 @@ def train(config: RunConfig, out: Path = Path("runs"), resume: Optional[Path] = 
     return run_dir, model, finished
 
 
+def write_card(run_dir: Path, model, episodes: int, command: str = "") -> dict[str, Any]:
+    """
+    Evaluate a run's policy alone greedy and sampled (``episodes`` each, env seeds the run never trained on;
+    none when 0) and write its model card (``README.md``) beside ``model.zip``.
+
+    :return: The evaluations by label ("greedy", "sampled")
+    """
+    from sb3_disagree.model_card import write_model_card
+
+    config = yaml.safe_load((Path(run_dir) / "config.yaml").read_text())
+    seed = config["seed"] + FINAL_EVAL_SEED_OFFSET
+    evaluations = {label: evaluate_alone(model, config, episodes, label == "greedy", seed)
+                   for label in ("greedy", "sampled")} if episodes > 0 else {}
+    write_model_card(run_dir, config, type(model).__name__, evaluations, command)
+    return evaluations
+
+
 def evaluate_alone(model: ACER, config: dict[str, Any], episodes: int, deterministic: bool, seed: int):
     """
     The new policy alone (no priors) in its run's task, on 4 envs seeded from ``seed``.

@@ -224,3 +224,32 @@ def test_a_run_whose_output_is_not_a_terminal_prints_plain_progress_lines(zoo, t
     assert len(lines) >= 2 and lines[-1].startswith("steps 400/400 | ")
     assert all("env steps/s" in line and "spent" in line for line in lines)
     assert "prior usage" in lines[-1] and "success" in lines[-1]
+
+
+def test_a_model_card_beside_the_model_and_priors_add_reads_it(zoo, tmp_path):
+    from sb3_disagree.model_card import read_model_card
+
+    result = runner.invoke(app, _train_args(zoo, tmp_path, "--card-episodes", "2"))
+    assert result.exit_code == 0, result.output
+    run = tmp_path / "sb3_disagree__ApartmentState-v0" / "bathtub" / "disagreement-0"
+    header = read_model_card(run / "README.md")
+    assert header["library_name"] == "stable-baselines3" and STATE_ID in header["tags"]
+    metrics = {m["name"]: m["value"] for m in header["model-index"][0]["results"][0]["metrics"]}
+    assert set(metrics) == {"success_rate (greedy)", "mean_reward (greedy)", "success_rate (sampled)",
+                            "mean_reward (sampled)"}
+    ours = header["sb3_disagree"]
+    assert ours["goal"] == "bathtub" and [p["goal"] for p in ours["priors"]] == ["shower", "toilet"]
+    assert ours["evaluation"]["greedy"]["episodes"] == 2 and ours["command"].startswith("dopt ")
+    assert "the new policy alone, greedy" in result.output and "the new policy alone, sampled" in result.output
+    # The card names the goal for the zoo.
+    other = tmp_path / "zoo"
+    result = runner.invoke(app, ["priors", "add", str(run / "model.zip"), "--env", STATE_ID, "--zoo", str(other),
+                                 "--episodes", "0"])
+    assert result.exit_code == 0, result.output
+    from sb3_disagree.zoo import Zoo
+
+    card = Zoo(other).get("bathtub", STATE_ID).card
+    assert card.training["model_card"]["mode"] == "disagreement"
+    result = runner.invoke(app, ["priors", "add", str(run / "model.zip"), "--zoo", str(other), "--episodes", "0",
+                                 "--replace"])
+    assert result.exit_code == 2 and "--env sb3_disagree/ApartmentState-v0" in " ".join(result.output.split())

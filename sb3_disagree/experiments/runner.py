@@ -86,6 +86,10 @@ def train_and_evaluate(run: Run, folder: Path, source: Optional[Path] = None,
               "fps": round((model.num_timesteps - begun) / max(seconds, 1e-9), 1), "final_alone": alone.as_dict(),
               "final_alone_greedy": greedy.as_dict(),
               "config": asdict(run.config), **({"continued_from": str(source), "from_steps": begun} if source else {})}
+    from sb3_disagree.model_card import write_model_card
+
+    write_model_card(folder, {**yaml.safe_load((folder / "config.yaml").read_text())}, type(model).__name__,
+                     {"greedy": greedy, "sampled": alone}, f"dopt experiment run {run.cell} (seed {run.seed})")
     write_atomic(folder / RESULT, json.dumps(result, indent=2) + "\n")
     return result
 
