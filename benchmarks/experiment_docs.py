@@ -58,7 +58,7 @@ def main(name: str, only_seeds: Optional[list[int]] = None) -> None:
         how += (f" (the overlapped cells, {', '.join(overlapped)}: one run at a time, two torch threads for the on-policy "
                 "update and one in each of its two threads while the replay updates overlap the rollouts)")
     body = (f"Commands: `dopt experiment run {name} --jobs 2 --seeds {','.join(map(str, seeds))}` then "
-            f"`python benchmarks/experiment_docs.py {name}{restricted}` (grid: `benchmarks/experiments/{name}.yaml`). "
+            f"`python benchmarks/experiment_docs.py {name}{restricted}` (grid: `sb3_disagree/data/experiments/{name}.yaml`). "
             f"{seeds_text}; {experiment.steps:,} env steps per run; {platform.machine()}, "
             f"{os.cpu_count()} cores, {how}. ACER: "
             f"{yaml.safe_dump(acer, default_flow_style=True, width=200).strip()}. {continued}\n\n"

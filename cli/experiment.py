@@ -20,7 +20,7 @@ def _root(name: str, out: Optional[Path]) -> Path:
 
 @app.command("list")
 def list_experiments() -> None:
-    """The experiments shipped in benchmarks/experiments/."""
+    """The experiments shipped in sb3_disagree/data/experiments/."""
     from sb3_disagree.experiments.spec import SHIPPED, load_experiment
 
     t = Table("name", "goal", "cells", "seeds", "steps")

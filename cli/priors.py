@@ -56,14 +56,16 @@ def list_priors(
         table.add_column("goal", no_wrap=True)
         if len(envs) > 1:
             table.add_column("env", overflow="fold")
-        for col in ["algorithm", "method", "steps", "success", *(["similarity", ""] if goal else []), "status"]:
+        for col in ["algorithm", "method", "steps", "success greedy", "success sampled",
+                    *(["similarity", ""] if goal else []), "status"]:
             table.add_column(col, no_wrap=col in ("similarity", ""))
         for e in entries:
             card = e.card
-            success = card.evaluation.get("success_rate") if card else None
+            success = [(c.get("success_rate") if card else None) for c in
+                       ((card.evaluation_greedy, card.evaluation) if card else ({}, {}))]
             row = [e.goal, *([e.env_id] if len(envs) > 1 else []), card.sb3_class.rsplit(".", 1)[-1] if card else "?",
                    str(card.training.get("method", "?")) if card else "?", str(card.training.get("steps", "?")) if card else "?",
-                   f"{success:.2f}" if success is not None else "-"]
+                   *(f"{v:.2f}" if v is not None else "-" for v in success)]
             if goal:
                 row += [f"{sims[e.goal]:.3f}" if e.goal in sims else "(goal)", "[bold green]chosen[/]" if e.goal in chosen else ""]
             row.append("[green]ok[/]" if not e.problem else f"[red]{e.problem}[/]")

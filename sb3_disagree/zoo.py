@@ -25,7 +25,7 @@ from sb3_disagree.files import write_atomic
 
 CARD = "card.json"
 MODEL = "model.zip"
-DEFAULT_ZOO = Path(__file__).resolve().parent.parent / "zoo"
+DEFAULT_ZOO = Path(__file__).resolve().parent / "data" / "zoo"  # the shipped zoo, package data
 # Algorithms whose policies expose a discrete action distribution (``policy.get_distribution``).
 DISTRIBUTION_CLASSES = {
     "ACER": "sb3_disagree.acer.ACER",

@@ -40,7 +40,7 @@ import yaml
 from sb3_disagree.training import ACER_KWARGS, RunConfig
 
 # Experiments shipped with the repository; a path to any YAML file works too.
-SHIPPED = Path(__file__).resolve().parents[2] / "benchmarks" / "experiments"
+SHIPPED = Path(__file__).resolve().parents[1] / "data" / "experiments"
 RESULT = "result.json"
 # What a continuation must share with the run it continues (everything but the budget).
 SAME = ("goal", "env_id", "mode", "alpha", "beta", "seed", "n_envs", "acer_kwargs")
