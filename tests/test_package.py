@@ -22,3 +22,80 @@ assert obs.shape == (4,) and info["goal_room"] == "bathroom"
 """
     result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert result.returncode == 0, result.stderr
+
+
+def test_the_wheel_works_alone_from_another_folder(tmp_path):
+    """Build the wheel, install it (no dependencies) into a fresh venv that sees this environment's packages,
+    and run the main commands from a folder with no repository: zoo, scenes and grids come from the wheel."""
+    import os
+    import site
+    import sysconfig
+    from pathlib import Path
+
+    repo = Path(__file__).resolve().parents[1]
+    dist = tmp_path / "dist"
+    build = subprocess.run([sys.executable, "-m", "pip", "wheel", "--no-deps", "--no-build-isolation", "-q", "-w",
+                            str(dist), str(repo)], capture_output=True, text=True, timeout=300)
+    assert build.returncode == 0, build.stderr
+    (wheel,) = dist.glob("sb3_disagree-*.whl")
+    assert wheel.stat().st_size < 60e6
+    venv = tmp_path / "venv"
+    subprocess.run([sys.executable, "-m", "venv", "--without-pip", str(venv)], check=True, timeout=120)
+    python = venv / "bin" / "python"
+    purelib = subprocess.run([str(python), "-c", "import sysconfig; print(sysconfig.get_paths()['purelib'])"],
+                             capture_output=True, text=True, check=True).stdout.strip()
+    # This environment's packages (torch, SB3, ...) but not its editable install of this repository.
+    ours = {sysconfig.get_paths()["purelib"], *site.getsitepackages()}
+    (Path(purelib) / "outer.pth").write_text("\n".join(sorted(ours)) + "\n")
+    install = subprocess.run([str(python), "-m", "pip", "install", "--no-deps", "--no-index", "-q", str(wheel)],
+                             capture_output=True, text=True, timeout=300)
+    assert install.returncode == 0, install.stderr
+    work = tmp_path / "elsewhere"
+    work.mkdir()
+    env = {**os.environ, "PYTHONPATH": ""}
+    dopt = str(venv / "bin" / "dopt")
+
+    def run(*args):
+        result = subprocess.run(args, cwd=work, capture_output=True, text=True, timeout=600, env=env)
+        assert result.returncode == 0, (args, result.stdout[-2000:], result.stderr[-2000:])
+        return result.stdout
+
+    where = run(str(python), "-c", "import sb3_disagree, sb3_disagree.zoo as z; print(sb3_disagree.__file__, z.DEFAULT_ZOO)")
+    assert str(repo) not in where and str(venv) in where
+    assert "chosen" in run(dopt, "priors", "list", "--goal", "bathtub")
+    assert "fig3-bathtub" in run(dopt, "experiment", "list")
+    out = run(dopt, "train", "--goal", "bathtub", "--env", "sb3_disagree/ApartmentState-v0", "--steps", "2000",
+              "--card-episodes", "2")
+    assert "done: 2,000 steps" in " ".join(out.split())
+    assert (work / "runs" / "sb3_disagree__ApartmentState-v0" / "bathtub" / "disagreement-0" / "README.md").exists()
+    run(str(python), "-c", "import gymnasium as gym, sb3_disagree; env = gym.make('sb3_disagree/Office-v0', "
+                           "goal='table', obs_width=32, obs_height=24); print(env.reset(seed=0)[0].shape)")
+
+
+def test_acer_trains_and_tunes_through_rl_zoo3(tmp_path):
+    """rl-zoo3's own train with the project's hyperparameter file, then a 2-trial optimisation."""
+    import csv
+    from pathlib import Path
+
+    import pytest
+
+    pytest.importorskip("rl_zoo3")
+    conf = str(Path(__file__).resolve().parents[1] / "benchmarks" / "hyperparams" / "acer.yml")
+    common = [sys.executable, "-m", "sb3_disagree.rl_zoo", "--algo", "acer", "--env", "CartPole-v1", "--conf-file",
+              conf, "--seed", "0"]
+    result = subprocess.run([*common, "-n", "2000", "-f", str(tmp_path / "train"), "--eval-freq", "-1"],
+                            capture_output=True, text=True, timeout=300, cwd=tmp_path)
+    assert result.returncode == 0, result.stderr[-3000:]
+    (model,) = (tmp_path / "train" / "acer").glob("CartPole-v1_*/CartPole-v1.zip")
+    from sb3_disagree import ACER
+
+    loaded = ACER.load(model)
+    assert loaded.num_timesteps >= 2000 and loaded.replay_ratio == 8  # acer.yml's CartPole entry
+    result = subprocess.run([*common, "-n", "1000", "-f", str(tmp_path / "opt"), "-optimize", "--n-trials", "2",
+                             "--n-jobs", "1", "--sampler", "random", "--pruner", "none", "--n-evaluations", "1",
+                             "--eval-episodes", "2"], capture_output=True, text=True, timeout=300, cwd=tmp_path)
+    assert result.returncode == 0, result.stderr[-3000:]
+    (report,) = (tmp_path / "opt" / "acer").glob("report_CartPole-v1_2-trials-*.csv")
+    rows = list(csv.DictReader(report.open()))
+    assert len(rows) == 2 and all(r["state"] == "COMPLETE" for r in rows)
+    assert {"params_learning_rate", "params_replay_ratio", "params_trust_region"} <= set(rows[0])
