@@ -43,3 +43,7 @@ app.add_typer(_experiment.app, name="experiment")
 
 def main() -> None:
     app()
+
+
+if __name__ == "__main__":
+    main()

@@ -77,7 +77,11 @@ def train(
                                       "evaluation on the model card written beside model.zip (0: none)."),
     progress_every: float = typer.Option(30.0, "--progress-every", help="Seconds between progress lines when the "
                                          "output is not a terminal."),
-    resume: Optional[Path] = typer.Option(None, "--resume", help="A run folder to continue."),
+    resume: Optional[Path] = typer.Option(None, "--resume", help="A run folder to continue (from its newest "
+                                          "complete checkpoint)."),
+    force: bool = typer.Option(False, "--force", help="Replace an existing run in the same folder."),
+    checkpoint_every: int = typer.Option(25_000, "--checkpoint-every", help="Env steps between checkpoints (model, "
+                                         "replay buffer, log positions; 0: only at the end)."),
 ) -> None:
     """Train a policy for a new goal with disagreement options (or the room sensor, or from scratch)."""
     with clean_errors():
@@ -87,15 +91,17 @@ def train(
                            priors="auto" if priors == "auto" else [p.strip() for p in priors.split(",") if p.strip()],
                            alpha=alpha, beta=beta, steps=100_000 if steps is None else steps, seed=seed, n_envs=n_envs,
                            eval_every=eval_every, eval_episodes=eval_episodes, vec_env=vec_env, overlap=overlap,
-                           frame_stack=frame_stack, jsrl_horizon=jsrl_horizon,
+                           frame_stack=frame_stack, jsrl_horizon=jsrl_horizon, checkpoint_every=checkpoint_every,
                            embedding=str(embedding) if embedding else None, zoo=str(zoo) if zoo else None)
         if resume is None:
             config.validate()
+        else:
+            _refuse_ignored_flags(config, resume, force)
 
         def show_priors(names, sims):
             console.print("priors: " + ", ".join(f"[bold]{n}[/] (similarity {s:.3f})" for n, s in zip(names, sims)))
 
-        kwargs = dict(resume=resume, on_priors=show_priors, steps=steps if resume is not None else None)
+        kwargs = dict(resume=resume, on_priors=show_priors, steps=steps if resume is not None else None, force=force)
         if console.is_terminal:
             with Live(console=console, refresh_per_second=2, transient=False) as live:
                 display = LiveDisplay(live)
@@ -123,6 +129,30 @@ def train(
             console.print(f"[yellow]interrupted[/] at {model.num_timesteps:,} steps; saved the model and replay buffer "
                           f"in {run_dir}; continue with: dopt train --goal {goal} --resume {run_dir}")
             raise typer.Exit(code=130)
+
+
+def _refuse_ignored_flags(config, resume: Path, force: bool) -> None:
+    """A resumed run keeps its saved settings: a flag that would change one is an error, not silently dropped."""
+    import yaml
+    from dataclasses import fields
+
+    from sb3_disagree.training import RunConfig
+
+    if force:
+        raise ValueError("--force replaces a run and --resume continues one: choose one")
+    saved_path = Path(resume) / "config.yaml"
+    if not saved_path.exists():
+        raise FileNotFoundError(f"{resume} is not a run folder with config.yaml and model.zip to resume")
+    saved = yaml.safe_load(saved_path.read_text())
+    if saved.get("goal") != config.goal:
+        raise ValueError(f"{resume} trains the goal {saved.get('goal')!r}, not {config.goal!r}")
+    defaults = RunConfig(goal=config.goal)
+    # The loop (--overlap) is the saved one whatever the flag; --steps is the new budget.
+    given = [f.name for f in fields(RunConfig) if f.name not in ("goal", "steps", "overlap", "acer_kwargs")
+             and getattr(config, f.name) != getattr(defaults, f.name)]
+    if given:
+        flags = ", ".join({"env_id": "--env"}.get(name, "--" + name.replace("_", "-")) for name in given)
+        raise ValueError(f"--resume continues {resume} with its saved settings; drop {flags}")
 
 
 def eval_run(

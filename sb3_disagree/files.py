@@ -25,3 +25,16 @@ def write_atomic(path: Union[str, Path], data: Union[bytes, str], mode: int = 0o
     finally:
         if os.path.exists(tmp):
             os.remove(tmp)
+
+
+def safe_name(word: str, what: str) -> str:
+    """
+    ``word`` when it can name a folder inside another (no separator, not empty, not ``.`` or ``..``), so that
+    a path built from a user's word stays under its root; a ValueError naming ``what`` otherwise.
+
+    :param word: The user's word (a goal, a cell name, a label)
+    :param what: What it is, for the message (e.g. "--goal")
+    """
+    if not isinstance(word, str) or not word.strip() or word.strip(".") == "" or any(c in word for c in "/\\\0"):
+        raise ValueError(f"{what} {word!r} cannot name a folder: use a word without '/', '\\\\' or leading dots only")
+    return word

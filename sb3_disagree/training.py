@@ -10,6 +10,9 @@ resumed run continues the step count and appends to the run's history (monitor f
 
 import json
 import os
+import pickle
+import shutil
+import zipfile
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -23,6 +26,8 @@ from stable_baselines3.common.logger import CSVOutputFormat, Logger, make_output
 
 from sb3_disagree.acer import ACER
 from sb3_disagree.acer.transfer import load_prior_weights, transfer_kwargs
+from sb3_disagree.checkpoints import Checkpoint, latest_checkpoint, save_checkpoint, sigterm_as_interrupt, truncate_logs
+from sb3_disagree.files import safe_name, write_atomic
 from sb3_disagree.options import MODES, PriorSet, make_options
 
 DEFAULT_ENV = "sb3_disagree/Apartment-v0"
@@ -77,6 +82,8 @@ class RunConfig:
         the priors keep their single observation
     :param jsrl_horizon: Mode "jsrl": the guide's horizon at the start, in steps; 0 for the priors' mean
         episode length on their zoo cards
+    :param checkpoint_every: Write a checkpoint (model, replay buffer, log positions) every this many env steps;
+        0 only at the end
     """
 
     goal: str
@@ -99,8 +106,11 @@ class RunConfig:
     overlap: bool = False
     frame_stack: int = 1
     jsrl_horizon: int = 0
+    checkpoint_every: int = 25_000
 
     def validate(self) -> None:
+        safe_name(self.goal, "--goal")
+        safe_name(self.env_id.replace("/", "__"), "--env")
         if self.mode not in MODES:
             raise ValueError(f"--mode must be one of {', '.join(MODES)}, got {self.mode!r}")
         if not self.beta >= 0:
@@ -111,6 +121,8 @@ class RunConfig:
             raise ValueError("--steps and --n-envs must be positive")
         if self.vec_env not in ("dummy", "subproc"):
             raise ValueError(f"--vec-env must be dummy or subproc, got {self.vec_env!r}")
+        if self.checkpoint_every < 0:
+            raise ValueError(f"--checkpoint-every must be >= 0, got {self.checkpoint_every}")
         if self.jsrl_horizon < 0:
             raise ValueError(f"--jsrl-horizon must be >= 0, got {self.jsrl_horizon}")
         if self.frame_stack < 1:
@@ -284,18 +296,20 @@ class EvaluateAlone(BaseCallback):
     :param config: The run's configuration: env, goal, seed, episodes per evaluation
     :param run_dir: Where ``evaluations.npz`` goes
     :param append: Keep the evaluations of the run this one resumes
+    :param upto: With ``append``, keep only those made at or before this many env steps
     """
 
     KEYS = ("timesteps", "successes", "successes_greedy", "results", "ep_lengths")
 
-    def __init__(self, config: RunConfig, run_dir: Path, append: bool = False) -> None:
+    def __init__(self, config: RunConfig, run_dir: Path, append: bool = False, upto: Optional[int] = None) -> None:
         super().__init__()
         self.config, self.path = config, run_dir / "evaluations.npz"
         self.every = max(config.eval_every // config.n_envs, 1)  # in calls, one per vectorised step
         self.history: dict[str, list] = {key: [] for key in self.KEYS}
         if append and self.path.exists():
             with np.load(self.path) as data:
-                self.history = {key: list(data[key]) for key in self.KEYS if key in data}
+                keep = [upto is None or t <= upto for t in data["timesteps"]]  # none after the checkpoint resumed
+                self.history = {key: [v for v, k in zip(data[key], keep) if k] for key in self.KEYS if key in data}
                 self.history.setdefault("successes_greedy", [])
         self.env = None
 
@@ -328,9 +342,13 @@ class EvaluateAlone(BaseCallback):
 
 def train(config: RunConfig, out: Path = Path("runs"), resume: Optional[Path] = None,
           callbacks: Optional[list[BaseCallback]] = None, on_priors: Optional[Callable[[list, list], None]] = None,
-          run_dir: Optional[Path] = None, steps: Optional[int] = None) -> tuple[Path, ACER, bool]:
+          run_dir: Optional[Path] = None, steps: Optional[int] = None, force: bool = False) -> tuple[Path, ACER, bool]:
     """
-    Train a new policy with the method (or from scratch), writing the run folder.
+    Train a new policy with the method (or from scratch, or a peer method), writing the run folder.
+
+    A run survives what stops it (``sb3_disagree.checkpoints``): a checkpoint every ``config.checkpoint_every``
+    env steps and at the end, SIGTERM saved like Ctrl-C; ``resume`` continues from the newest complete
+    checkpoint, with the logs cut back to it.
 
     :param config: The run's configuration (ignored in favour of the saved one when resuming)
     :param out: Root of the runs
@@ -339,60 +357,93 @@ def train(config: RunConfig, out: Path = Path("runs"), resume: Optional[Path] = 
     :param on_priors: Called with the chosen priors and their similarities
     :param run_dir: Write the run here instead of under ``out`` (experiments choose their own layout)
     :param steps: With ``resume``, the run's new total of env steps (default: the saved one)
+    :param force: Replace an existing run in the folder (without it, an existing run is an error)
     :return: The run folder, the model, and whether training finished (False when interrupted)
     """
+    checkpoint = None
     if resume is not None:
         run_dir = Path(resume)
         if not (run_dir / "config.yaml").exists() or not (run_dir / "model.zip").exists():
             raise FileNotFoundError(f"{run_dir} is not a run folder with config.yaml and model.zip to resume")
         saved = yaml.safe_load((run_dir / "config.yaml").read_text())
         config = RunConfig(**{k: v for k, v in saved.items() if k in RunConfig.__dataclass_fields__})
+        checkpoint = latest_checkpoint(run_dir)
+        done = checkpoint[1]["num_timesteps"] if checkpoint else int(saved.get("num_timesteps") or 0)
         if steps is not None:  # a finished run continues to a larger budget
+            if steps < done:
+                raise ValueError(f"--steps {steps} is below the {done:,} steps {run_dir} has already trained")
             config.steps = steps
+        if checkpoint is not None:  # the history continues from the checkpoint: what came after it is cut
+            truncate_logs(run_dir, checkpoint[1]["logs"])
     config.validate()
     run_dir = Path(resume or run_dir or config.run_dir(Path(out)))
+    if resume is None and run_dir.exists() and any(run_dir.iterdir()):
+        if not force:
+            raise ValueError(f"{run_dir} already holds a run: continue it with --resume {run_dir}, or replace it "
+                             "with --force")
+        shutil.rmtree(run_dir)
+    created = not run_dir.exists()
     run_dir.mkdir(parents=True, exist_ok=True)
-    env = build_env(config, run_dir, append=resume is not None)
-    behaviour, prior_names, sims, priors = None, [], [], None
-    if config.mode not in ("scratch", "ppo"):
-        prior_names, sims, priors = choose_priors(config, env)
-        if on_priors:
-            on_priors(prior_names, sims)
-        horizon = config.jsrl_horizon or guide_horizon(config, prior_names) if config.mode == "jsrl" else 0
-        behaviour = make_options(config.mode, priors, config.alpha, config.beta, config.entropy_offset,
-                                 seed=config.seed, horizon=horizon)
-    saved_config = dict(asdict(config), chosen_priors=prior_names, similarities=sims)
-    if resume is not None:
-        if config.mode == "ppo":
-            model = algorithm_of(config.mode).load(run_dir / "model.zip", env=env)
+    try:
+        env = build_env(config, run_dir, append=resume is not None)
+        behaviour, prior_names, sims, priors = None, [], [], None
+        if config.mode not in ("scratch", "ppo"):
+            prior_names, sims, priors = choose_priors(config, env)
+            if on_priors:
+                on_priors(prior_names, sims)
+            horizon = config.jsrl_horizon or guide_horizon(config, prior_names) if config.mode == "jsrl" else 0
+            behaviour = make_options(config.mode, priors, config.alpha, config.beta, config.entropy_offset,
+                                     seed=config.seed, horizon=horizon)
+        saved_config = dict(asdict(config), chosen_priors=prior_names, similarities=sims)
+        if resume is not None:
+            model = _resumed_model(config, run_dir, env, behaviour, checkpoint)
+            remaining = max(config.steps - model.num_timesteps, 0)
         else:
-            model = ACER.load(run_dir / "model.zip", env=env, behaviour=behaviour, overlap=config.overlap)
-        if (run_dir / "replay_buffer.pkl").exists() and isinstance(model, ACER):
-            model.load_replay_buffer(run_dir / "replay_buffer.pkl")
-        remaining = max(config.steps - model.num_timesteps, 0)
-    else:
-        model = new_model(config, env, behaviour, priors)
-        remaining = config.steps
-        (run_dir / "config.yaml").write_text(yaml.safe_dump(saved_config, sort_keys=False))
+            model = new_model(config, env, behaviour, priors)
+            remaining = config.steps
+            (run_dir / "config.yaml").write_text(yaml.safe_dump(saved_config, sort_keys=False))
+    except BaseException:
+        if created:  # a failed start leaves nothing behind
+            shutil.rmtree(run_dir, ignore_errors=True)
+        raise
     model.set_logger(run_logger(run_dir, append=resume is not None))
-    own = [RecordTrajectories(run_dir / "trajectories.jsonl")]
+    own: list[BaseCallback] = [RecordTrajectories(run_dir / "trajectories.jsonl")]
     if config.eval_every:
-        own.append(EvaluateAlone(config, run_dir, append=resume is not None))
+        own.append(EvaluateAlone(config, run_dir, append=resume is not None, upto=model.num_timesteps))
+    if config.checkpoint_every:
+        own.append(Checkpoint(run_dir, config.checkpoint_every))
     finished = True
     try:
-        model.learn(remaining, callback=CallbackList([*own, *(callbacks or [])]), log_interval=10,
-                    reset_num_timesteps=resume is None)
+        with sigterm_as_interrupt():
+            model.learn(remaining, callback=CallbackList([*own, *(callbacks or [])]), log_interval=10,
+                        reset_num_timesteps=resume is None)
     except KeyboardInterrupt:
         finished = False
-    model.save(run_dir / "model.zip")
-    if not finished and isinstance(model, ACER):
-        model.save_replay_buffer(run_dir / "replay_buffer.pkl")
-    elif (run_dir / "replay_buffer.pkl").exists():
+    # A finished run keeps no replay buffer (a continuation starts with an empty one); an interrupted one does.
+    with sigterm_as_interrupt():
+        save_checkpoint(model, run_dir, with_buffer=not finished)
+        saved_config.update(num_timesteps=int(model.num_timesteps), finished=finished)
+        write_atomic(run_dir / "config.yaml", yaml.safe_dump(saved_config, sort_keys=False))
+    if (run_dir / "replay_buffer.pkl").exists():  # left by a version that kept it beside the model
         os.remove(run_dir / "replay_buffer.pkl")
-    saved_config.update(num_timesteps=int(model.num_timesteps), finished=finished)
-    (run_dir / "config.yaml").write_text(yaml.safe_dump(saved_config, sort_keys=False))
     env.close()
     return run_dir, model, finished
+
+
+def _resumed_model(config: RunConfig, run_dir: Path, env, behaviour, checkpoint):
+    """The model a resumed run continues: from its newest complete checkpoint (with the replay buffer it kept),
+    else from ``model.zip`` (and a ``replay_buffer.pkl`` beside it, as earlier versions left them)."""
+    folder = checkpoint[0] if checkpoint else run_dir
+    try:
+        if config.mode == "ppo":
+            model = algorithm_of(config.mode).load(folder / "model.zip", env=env)
+        else:
+            model = ACER.load(folder / "model.zip", env=env, behaviour=behaviour, overlap=config.overlap)
+        if (folder / "replay_buffer.pkl").exists() and isinstance(model, ACER):
+            model.load_replay_buffer(folder / "replay_buffer.pkl")
+    except (EOFError, OSError, zipfile.BadZipFile, pickle.UnpicklingError) as exc:
+        raise ValueError(f"{run_dir} cannot be resumed: its saved model or replay buffer is damaged ({exc})") from None
+    return model
 
 
 def write_card(run_dir: Path, model, episodes: int, command: str = "") -> dict[str, Any]:

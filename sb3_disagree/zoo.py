@@ -62,6 +62,28 @@ def _channel_first(space: dict[str, Any]) -> dict[str, Any]:
     return space
 
 
+def _make_env(env_id: str, goal: str, env_kwargs: Optional[dict[str, Any]]):
+    """The environment a prior is added for (not reset: nothing is rendered), or a ZooError saying why not."""
+    import gymnasium as gym
+
+    import sb3_disagree.envs  # noqa: F401  (registers the environments)
+
+    if env_id not in gym.registry:
+        raise ZooError(f"unknown environment {env_id!r}")
+    try:
+        env = gym.make(env_id, goal=goal, **(env_kwargs or {}))
+    except (TypeError, ValueError, KeyError) as exc:
+        raise ZooError(f"{env_id} has no task {goal!r} with {env_kwargs or {}}: {exc}") from None
+    env.close()
+    return env
+
+
+def space_fits(recorded: dict[str, Any], space: spaces.Space) -> bool:
+    """Whether a space recorded on a card is ``space`` (HWC and CHW images taken as equal): the one check that
+    ranking priors, loading them and adding them share."""
+    return _channel_first(recorded) == _channel_first(space_to_dict(space))
+
+
 def sha256_of(path: Union[str, Path]) -> str:
     h = hashlib.sha256()
     with open(path, "rb") as f:
@@ -128,7 +150,41 @@ class Entry:
         return self.path / MODEL
 
 
+def _card_problem(card: Card, goal_dir: Path, env_id: str) -> Optional[str]:
+    """What is wrong with a card's fields, or None: the checks made before anything of the entry is loaded."""
+    if card.goal != goal_dir.name:
+        return f"the card's goal {card.goal!r} is not its folder's name {goal_dir.name!r}"
+    if card.env_id != env_id:
+        return f"the card's env {card.env_id!r} is not its folder's {env_id!r}"
+    if card.sb3_class not in DISTRIBUTION_CLASSES.values() and card.sb3_class not in _REGISTERED:
+        return f"the card names an unknown algorithm {card.sb3_class!r}"
+    if not isinstance(card.env_kwargs, dict) or not all(isinstance(k, str) for k in card.env_kwargs):
+        return "the card's env_kwargs are not a mapping of names"
+    if not all(isinstance(v, (str, int, float, bool, type(None))) for v in card.env_kwargs.values()):
+        return "the card's env_kwargs hold values other than plain numbers, strings and booleans"
+    return None
+
+
+# Algorithms a card may name beyond the known ones, added by the user (``register_algorithm``).
+_REGISTERED: set[str] = set()
+
+
+def register_algorithm(path: str) -> None:
+    """
+    Let cards name another algorithm class (import path ``package.module.Class``) with a discrete action
+    distribution. Only the known SB3, sb3-contrib and sb3-disagree classes and those registered here are
+    ever imported from a card.
+    """
+    _REGISTERED.add(path)
+
+
 def algorithm_class(path: str) -> type:
+    """The algorithm class a card names: a known one or a registered one; a ZooError for anything else (a card
+    must not make this process import whatever module it names)."""
+    if path not in DISTRIBUTION_CLASSES.values() and path not in _REGISTERED:
+        raise ZooError(f"a card names the algorithm {path!r}, which is neither a known one "
+                       f"({', '.join(DISTRIBUTION_CLASSES.values())}) nor registered with "
+                       "sb3_disagree.zoo.register_algorithm")
     module, _, name = path.rpartition(".")
     return getattr(importlib.import_module(module), name)
 
@@ -176,6 +232,8 @@ class Zoo:
         except (ValueError, TypeError) as exc:
             problem = f"unreadable card.json ({exc})"
         if problem is None:
+            problem = _card_problem(card, goal_dir, env_id)
+        if problem is None:
             if not (goal_dir / MODEL).exists():
                 problem = "no model.zip"
             elif sha256_of(goal_dir / MODEL) != card.sha256:
@@ -195,9 +253,9 @@ class Zoo:
         for e in self.entries(env_id):
             if e.problem or e.card is None:
                 continue
-            if observation_space is not None and e.card.observation_space != space_to_dict(observation_space):
+            if observation_space is not None and not space_fits(e.card.observation_space, observation_space):
                 continue
-            if action_space is not None and e.card.action_space != space_to_dict(action_space):
+            if action_space is not None and not space_fits(e.card.action_space, action_space):
                 continue
             out.append(e.goal)
         return out
@@ -217,9 +275,10 @@ class Zoo:
         assert card is not None
         if env is not None:
             for kind, space in (("observation", env.observation_space), ("action", env.action_space)):
-                have, want = getattr(card, f"{kind}_space"), space_to_dict(space)
-                if _channel_first(have) != _channel_first(want):
-                    raise ZooError(f"prior {entry.goal!r} expects {kind}s {have}, the environment gives {want}")
+                have = getattr(card, f"{kind}_space")
+                if not space_fits(have, space):
+                    raise ZooError(f"prior {entry.goal!r} expects {kind}s {have}, the environment gives "
+                                   f"{space_to_dict(space)}")
         check_model_file(entry.model_path)
         try:
             cls = algorithm_class(card.sb3_class)
@@ -257,7 +316,11 @@ class Zoo:
         :param replace: Whether an existing entry for this goal may be replaced
         :return: The new entry
         """
+        from sb3_disagree.files import safe_name
+
         model_path = Path(model_path)
+        safe_name(goal, "the goal")
+        env = _make_env(env_id, goal, env_kwargs)  # everything is checked before anything is written
         check_model_file(model_path)
         sb3_class = identify_algorithm(model_path)
         try:
@@ -265,6 +328,10 @@ class Zoo:
         except Exception as exc:
             raise ZooError(f"{model_path} could not be loaded as {sb3_class}: {exc}") from exc
         check_distribution(model)
+        for kind in ("observation", "action"):
+            if not space_fits(space_to_dict(getattr(model, f"{kind}_space")), getattr(env, f"{kind}_space")):
+                raise ZooError(f"{model_path} acts on {kind}s {space_to_dict(getattr(model, f'{kind}_space'))}, but "
+                               f"{env_id} gives {space_to_dict(getattr(env, f'{kind}_space'))}")
         target = self.root / env_dir_name(env_id) / goal
         if target.exists() and not replace:
             raise ZooError(f"the zoo already has a prior for {goal!r} in {env_id} (remove it first)")

@@ -445,9 +445,10 @@ class ACER(BaseAlgorithm):
         self.logger.record("train/n_updates", self._n_updates, exclude="tensorboard")
 
     def _sync_policy(self, learner: ACERPolicy) -> None:
-        """Copy the learner (both networks and the optimizer state) into ``self.policy``."""
+        """Copy the learner (both networks and the optimizer state) into ``self.policy``. The optimizer's state is
+        deep-copied: ``load_state_dict`` would share its tensors, which the learner keeps updating in place."""
         self.policy.load_state_dict(learner.state_dict())
-        self.policy.optimizer.load_state_dict(learner.optimizer.state_dict())
+        self.policy.optimizer.load_state_dict(copy.deepcopy(learner.optimizer.state_dict()))
 
     def learn(
         self: SelfACER,

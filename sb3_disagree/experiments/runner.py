@@ -74,7 +74,8 @@ def train_and_evaluate(run: Run, folder: Path, source: Optional[Path] = None,
     if source is not None:
         run_dir, model, finished = train(run.config, resume=folder, steps=run.config.steps, callbacks=callbacks)
     else:
-        run_dir, model, finished = train(run.config, run_dir=folder, callbacks=callbacks)
+        # An unfinished run of this experiment (no result.json) starts again from scratch.
+        run_dir, model, finished = train(run.config, run_dir=folder, callbacks=callbacks, force=True)
     if not finished:
         raise KeyboardInterrupt
     seconds = time.perf_counter() - start

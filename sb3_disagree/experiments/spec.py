@@ -37,6 +37,7 @@ from typing import Any, Optional
 
 import yaml
 
+from sb3_disagree.files import safe_name
 from sb3_disagree.training import ACER_KWARGS, RunConfig
 
 # Experiments shipped with the repository; a path to any YAML file works too.
@@ -151,6 +152,10 @@ class Experiment:
         # Seed-major order: an experiment stopped early has every cell for its first seeds.
         for seed in self.seeds:
             for cell, overrides in self.cells.items():
+                safe_name(str(cell), f"experiment {self.name!r}: cell")
+                if not isinstance(overrides, (dict, type(None))):
+                    raise ValueError(f"experiment {self.name!r}, cell {cell!r}: a cell is a mapping of run fields, "
+                                     f"got {overrides!r}")
                 overrides = dict(overrides or {})
                 same_as = overrides.pop("same_as", None)
                 if same_as is not None and (not isinstance(same_as, str) or same_as.count("/") != 1):
