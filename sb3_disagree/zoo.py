@@ -207,8 +207,16 @@ class Zoo:
     :param root: The zoo folder; the zoo shipped with the package by default
     """
 
-    def __init__(self, root: Optional[Union[str, Path]] = None) -> None:
+    def __init__(self, root: Optional[Union[str, Path]] = None, trusted: Optional[Union[str, Path]] = None) -> None:
         self.root = Path(root) if root is not None else DEFAULT_ZOO
+        # A trust list kept outside the zoo (a file of SHA-256 hashes, one per line; SB3_DISAGREE_TRUSTED names
+        # one for every command): where given, an entry whose model is not on it is refused before anything
+        # of it is unpickled. The shipped zoo needs none.
+        trusted = trusted if trusted is not None else os.environ.get("SB3_DISAGREE_TRUSTED")
+        self.trusted: Optional[set[str]] = None
+        if trusted:
+            lines = Path(trusted).read_text().split()
+            self.trusted = {line.strip().lower() for line in lines if line.strip() and not line.startswith("#")}
 
     def entries(self, env_id: Optional[str] = None) -> list[Entry]:
         """All entries (of one env id if given), sorted; damaged ones carry their problem."""
@@ -238,6 +246,8 @@ class Zoo:
                 problem = "no model.zip"
             elif sha256_of(goal_dir / MODEL) != card.sha256:
                 problem = "model.zip does not match the card's sha256 (corrupt or replaced)"
+            elif self.trusted is not None and self.root != DEFAULT_ZOO and card.sha256 not in self.trusted:
+                problem = "model.zip is not on the trust list"
         return Entry(goal_dir, env_id, card.goal if card else goal_dir.name, card, problem)
 
     def get(self, goal: str, env_id: str) -> Entry:

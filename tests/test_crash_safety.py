@@ -176,3 +176,20 @@ def test_the_overlapped_trainers_optimizer_state_is_copied_not_shared():
             if isinstance(v, th.Tensor) and v.is_floating_point():
                 v.add_(1.0)
     assert all(th.equal(a[k], b[k]) for a, b in zip(acting, before) for k in b)
+
+
+def test_a_trust_list_outside_the_zoo_refuses_what_is_not_on_it(tmp_path, monkeypatch):
+    from sb3_disagree.zoo import Zoo, ZooError
+
+    zoo = tmp_path / "zoo"
+    ACER("MlpPolicy", make_vec_env(STATE_ID, n_envs=1, env_kwargs=dict(goal="bed"))).save(tmp_path / "m.zip")
+    entry = Zoo(zoo).add(tmp_path / "m.zip", "bed", STATE_ID)
+    trust = tmp_path / "trusted.txt"
+    trust.write_text("# hashes of priors I made\n" + "0" * 64 + "\n")
+    monkeypatch.setenv("SB3_DISAGREE_TRUSTED", str(trust))
+    untrusted = Zoo(zoo).get("bed", STATE_ID)
+    assert untrusted.problem == "model.zip is not on the trust list"
+    with pytest.raises(ZooError, match="trust list"):
+        Zoo(zoo).load(untrusted)
+    trust.write_text(entry.card.sha256 + "\n")
+    assert Zoo(zoo).get("bed", STATE_ID).problem is None
