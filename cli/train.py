@@ -70,6 +70,8 @@ def train(
                                  "sequential loop the experiments use."),
     frame_stack: int = typer.Option(1, "--frame-stack", help="The new policy sees its last this many observations "
                                     "(its memory); the priors keep one."),
+    init: str = typer.Option("scratch", "--init", help="scratch (a fresh network) or prior (the nearest prior's "
+                             "weights, as finetune; with any mode that has priors)."),
     jsrl_horizon: int = typer.Option(0, "--jsrl-horizon", help="jsrl: the guide's first horizon in steps (0: the "
                                      "priors' mean episode length on their cards)."),
     out: Path = typer.Option(Path("runs"), "--out", help="Root folder of the runs."),
@@ -91,7 +93,7 @@ def train(
                            priors="auto" if priors == "auto" else [p.strip() for p in priors.split(",") if p.strip()],
                            alpha=alpha, beta=beta, steps=100_000 if steps is None else steps, seed=seed, n_envs=n_envs,
                            eval_every=eval_every, eval_episodes=eval_episodes, vec_env=vec_env, overlap=overlap,
-                           frame_stack=frame_stack, jsrl_horizon=jsrl_horizon, checkpoint_every=checkpoint_every,
+                           frame_stack=frame_stack, jsrl_horizon=jsrl_horizon, init=init, checkpoint_every=checkpoint_every,
                            embedding=str(embedding) if embedding else None, zoo=str(zoo) if zoo else None)
         if resume is None:
             config.validate()

@@ -82,6 +82,8 @@ class RunConfig:
         the priors keep their single observation
     :param jsrl_horizon: Mode "jsrl": the guide's horizon at the start, in steps; 0 for the priors' mean
         episode length on their zoo cards
+    :param init: "scratch" (a fresh network) or "prior" (the most similar prior's architecture and weights, as
+        "finetune" does, for any mode: e.g. disagreement options with a new policy that starts as the prior)
     :param checkpoint_every: Write a checkpoint (model, replay buffer, log positions) every this many env steps;
         0 only at the end
     """
@@ -107,6 +109,7 @@ class RunConfig:
     frame_stack: int = 1
     jsrl_horizon: int = 0
     checkpoint_every: int = 25_000
+    init: str = "scratch"
 
     def validate(self) -> None:
         safe_name(self.goal, "--goal")
@@ -121,6 +124,10 @@ class RunConfig:
             raise ValueError("--steps and --n-envs must be positive")
         if self.vec_env not in ("dummy", "subproc"):
             raise ValueError(f"--vec-env must be dummy or subproc, got {self.vec_env!r}")
+        if self.init not in ("scratch", "prior"):
+            raise ValueError(f"--init must be scratch or prior, got {self.init!r}")
+        if self.init == "prior" and self.mode in ("scratch", "ppo"):
+            raise ValueError(f"--init prior starts from a prior's weights: mode {self.mode} has no priors")
         if self.checkpoint_every < 0:
             raise ValueError(f"--checkpoint-every must be >= 0, got {self.checkpoint_every}")
         if self.jsrl_horizon < 0:
@@ -183,13 +190,14 @@ def new_model(config: RunConfig, env, behaviour, priors: Optional[PriorSet]):
     if config.mode == "kickstart":
         acer_kwargs = {**KICKSTART, **acer_kwargs}
     policy_kwargs = dict(acer_kwargs.pop("policy_kwargs", {}))
-    if config.mode == "finetune":  # the most similar prior's architecture, and below its weights
+    from_prior = config.mode == "finetune" or config.init == "prior"
+    if from_prior:  # the most similar prior's architecture, and below its weights
         policy_kwargs.update(transfer_kwargs(priors.priors[0].policy))
     if config.frame_stack > 1:
         policy_kwargs["frame_stack"] = config.frame_stack
     model = ACER(policy, env, seed=config.seed, behaviour=behaviour, overlap=config.overlap,
                  policy_kwargs=policy_kwargs, **acer_kwargs)
-    if config.mode == "finetune":
+    if from_prior:
         load_prior_weights(model.policy, priors.priors[0].policy)
     return model
 
