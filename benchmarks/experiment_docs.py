@@ -24,7 +24,7 @@ from sb3_disagree.experiments.spec import load_experiment
 ROOT = Path(__file__).resolve().parent / "results" / "experiments"
 
 
-def main(name: str, only_seeds: Optional[list[int]] = None) -> None:
+def main(name: str, only_seeds: Optional[list[int]] = None, note: str = "") -> None:
     experiment = load_experiment(name)
     experiment.restrict(seeds=only_seeds)
     root = ROOT / experiment.name
@@ -51,6 +51,13 @@ def main(name: str, only_seeds: Optional[list[int]] = None) -> None:
         seeds_text = f"Seeds {', '.join(map(str, seeds))}"
     else:
         seeds_text = "Seeds per cell: " + "; ".join(f"{k} {', '.join(map(str, v))}" for k, v in per_cell.items())
+    run_cfg = summaries[0].records[0]["config"]
+    alone_every = (f"{run_cfg.get('eval_episodes', 20)} episodes every {run_cfg.get('eval_every', 0) // 1000}k steps"
+                   if run_cfg.get("eval_every") else "not evaluated along the way")
+    greedy_curve = ("; dotted: the same with greedy actions, SB3's default" if any(len(c.alone_greedy) for c in summaries)
+                    else "")
+    final_how = (" with SB3's `evaluate_policy` from env seeds the run never trained on, greedy and sampled"
+                 if any(c.final_greedy_seeds for c in summaries) else "")
     restricted = f" --seeds {','.join(map(str, only_seeds))}" if only_seeds else ""
     how = "two runs at a time, one torch thread each"
     overlapped = [c.cell for c in summaries if c.records[0]["config"].get("overlap")]
@@ -60,14 +67,15 @@ def main(name: str, only_seeds: Optional[list[int]] = None) -> None:
     body = (f"Commands: `dopt experiment run {name} --jobs 2 --seeds {','.join(map(str, seeds))}` then "
             f"`python benchmarks/experiment_docs.py {name}{restricted}` (grid: `sb3_disagree/data/experiments/{name}.yaml`). "
             f"{seeds_text}; {experiment.steps:,} env steps per run; {platform.machine()}, "
-            f"{os.cpu_count()} cores, {how}. ACER: "
+            f"{os.cpu_count()} cores, {how}{'; ' + note if note else ''}. ACER: "
             f"{yaml.safe_dump(acer, default_flow_style=True, width=200).strip()}. {continued}\n\n"
             f"![{experiment.name}](images/{figure.name})\n\n{table_markdown(experiment, summaries)}\n\n"
             "Solid lines: training success (the last 50 episodes over all envs, priors included where they were "
-            "followed), mean over seeds with a 95% t-interval (none with fewer than 3 seeds); dashed: the new policy alone (no priors, sampled "
-            "actions, 20 episodes every 20k steps). Table: steps to 50%/90% and success at the budgets read from "
-            "the mean training curve; AUC is the mean of that curve over the run; the new policy alone (final) is "
-            f"evaluated over {experiment.final_episodes} episodes after training, per seed in brackets.\n\n"
+            "followed), mean over seeds with a 95% t-interval (none with fewer than 3 seeds); dashed: the new policy "
+            f"alone (no priors, sampled actions, {alone_every}){greedy_curve}. Table: steps to 50%/90% and success at "
+            "the budgets read from the mean training curve; AUC is the mean of that curve over the run; the new policy "
+            f"alone (final) is evaluated over {experiment.final_episodes} episodes after training{final_how}, per seed "
+            "in brackets.\n\n"
             f"Per seed, read from each seed's own training curve (the same 50-episode window):\n\n"
             f"{seeds_markdown(summaries)}\n")
     ratio = ratio_markdown(grid, summaries)
@@ -83,5 +91,6 @@ if __name__ == "__main__":
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("name")
     parser.add_argument("--seeds", help="only these seeds: 0,1,2")
+    parser.add_argument("--note", default="", help="what else ran on the machine meanwhile, said beside the machine")
     args = parser.parse_args()
-    main(args.name, [int(s) for s in args.seeds.split(",")] if args.seeds else None)
+    main(args.name, [int(s) for s in args.seeds.split(",")] if args.seeds else None, args.note)

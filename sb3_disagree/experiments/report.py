@@ -207,7 +207,7 @@ def plot(experiment: Experiment, grid: np.ndarray, summaries: list[CellSummary],
         legend_title = "solid: training; the new policy alone: dashed sampled, dotted greedy"
     elif any(len(s.alone_steps) for s in summaries):
         legend_title = "solid: training; dashed: the new policy alone (sampled)"
-    ax1.legend(loc="lower right", fontsize=8, title=legend_title, title_fontsize=7)
+    ax1.legend(loc="center right", fontsize=8, title=legend_title, title_fontsize=7, framealpha=0.6)
     if ax2.lines:
         ax2.legend(loc="upper right", fontsize=8)
     for ax, s in zip(path_axes, summaries):
