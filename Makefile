@@ -18,11 +18,11 @@ test: setup
 setup: gl $(STAMP)
 
 # torch goes in first: anything that pulls it in later would fetch the CUDA build.
-$(STAMP): pyproject.toml
+$(STAMP): pyproject.toml constraints.txt
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install -q --upgrade pip
 	$(PY) -m pip install -q $(TORCH)
-	$(PY) -m pip install -q -e ".[test]"
+	$(PY) -m pip install -q -c constraints.txt -e ".[test]"
 	touch $@
 
 # Headless OpenGL (Mesa llvmpipe) for MiniWorld; installed only when running as root and missing.
