@@ -70,6 +70,8 @@ def train(
                                  "sequential loop the experiments use."),
     frame_stack: int = typer.Option(1, "--frame-stack", help="The new policy sees its last this many observations "
                                     "(its memory); the priors keep one."),
+    record_trajectories: bool = typer.Option(False, "--record-trajectories", help="Write env 0's episodes to "
+                                             "trajectories.jsonl (for dopt eval --trajectory)."),
     init: str = typer.Option("scratch", "--init", help="scratch (a fresh network) or prior (the nearest prior's "
                              "weights, as finetune; with any mode that has priors)."),
     jsrl_horizon: int = typer.Option(0, "--jsrl-horizon", help="jsrl: the guide's first horizon in steps (0: the "
@@ -93,7 +95,8 @@ def train(
                            priors="auto" if priors == "auto" else [p.strip() for p in priors.split(",") if p.strip()],
                            alpha=alpha, beta=beta, steps=100_000 if steps is None else steps, seed=seed, n_envs=n_envs,
                            eval_every=eval_every, eval_episodes=eval_episodes, vec_env=vec_env, overlap=overlap,
-                           frame_stack=frame_stack, jsrl_horizon=jsrl_horizon, init=init, checkpoint_every=checkpoint_every,
+                           frame_stack=frame_stack, jsrl_horizon=jsrl_horizon, init=init,
+                           record_trajectories=record_trajectories, checkpoint_every=checkpoint_every,
                            embedding=str(embedding) if embedding else None, zoo=str(zoo) if zoo else None)
         if resume is None:
             config.validate()
@@ -199,7 +202,8 @@ def draw_recorded(run_dir: Path, cfg: dict, out: Path, episode: int = -1) -> Non
     path = run_dir / "trajectories.jsonl"
     lines = path.read_text().splitlines() if path.exists() else []
     if not lines:
-        raise FileNotFoundError(f"{run_dir} has no recorded episodes (trajectories.jsonl)")
+        raise FileNotFoundError(f"{run_dir} has no recorded episodes (trajectories.jsonl): train with "
+                                "--record-trajectories to record them")
     try:
         record = json.loads(lines[episode])
     except IndexError:

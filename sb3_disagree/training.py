@@ -2,8 +2,8 @@
 One training run of the method: choose priors, build the behaviour, train ACER, write the run folder.
 
 A run folder (``runs/<env>/<goal>/<mode>-<seed>/``) holds ``config.yaml``, ``model.zip``,
-``progress.csv``, TensorBoard events, ``monitor/`` files and ``trajectories.jsonl`` (the recorded
-episodes with their per-step tags). An interrupted run saves the model and the replay buffer; a
+``progress.csv``, TensorBoard events, ``monitor/`` files, ``checkpoints/``, the model card ``README.md`` and,
+when asked (``record_trajectories``), ``trajectories.jsonl`` (the recorded episodes with their per-step tags). An interrupted run saves the model and the replay buffer; a
 resumed run continues the step count and appends to the run's history (monitor files, ``progress.csv``,
 ``evaluations.npz``), so its curves read as one run.
 """
@@ -84,6 +84,8 @@ class RunConfig:
         episode length on their zoo cards
     :param init: "scratch" (a fresh network) or "prior" (the most similar prior's architecture and weights, as
         "finetune" does, for any mode: e.g. disagreement options with a new policy that starts as the prior)
+    :param record_trajectories: Write env 0's episodes (positions and per-step tags) to ``trajectories.jsonl``, for
+        the trajectory pictures (``dopt eval --trajectory``, Figure 5)
     :param checkpoint_every: Write a checkpoint (model, replay buffer, log positions) every this many env steps;
         0 only at the end
     """
@@ -110,6 +112,7 @@ class RunConfig:
     jsrl_horizon: int = 0
     checkpoint_every: int = 25_000
     init: str = "scratch"
+    record_trajectories: bool = False
 
     def validate(self) -> None:
         safe_name(self.goal, "--goal")
@@ -415,7 +418,9 @@ def train(config: RunConfig, out: Path = Path("runs"), resume: Optional[Path] = 
             shutil.rmtree(run_dir, ignore_errors=True)
         raise
     model.set_logger(run_logger(run_dir, append=resume is not None))
-    own: list[BaseCallback] = [RecordTrajectories(run_dir / "trajectories.jsonl")]
+    own: list[BaseCallback] = []
+    if config.record_trajectories:
+        own.append(RecordTrajectories(run_dir / "trajectories.jsonl"))
     if config.eval_every:
         own.append(EvaluateAlone(config, run_dir, append=resume is not None, upto=model.num_timesteps))
     if config.checkpoint_every:

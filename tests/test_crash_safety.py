@@ -36,14 +36,14 @@ def _tree(root: Path) -> dict[str, str]:
 
 
 def test_an_existing_run_is_never_overwritten_without_force(tmp_path):
-    assert runner.invoke(app, _args(tmp_path, "--steps", "1000")).exit_code == 0
+    assert runner.invoke(app, _args(tmp_path, "--steps", "1000", "--record-trajectories")).exit_code == 0
     run = tmp_path / "sb3_disagree__ApartmentState-v0" / "bathtub" / "disagreement-0"
     before = _tree(run)
     episodes = (run / "trajectories.jsonl").read_text()
     result = runner.invoke(app, _args(tmp_path, "--steps", "1000"))
     assert result.exit_code == 2 and "--resume" in result.output and "--force" in result.output
     assert _tree(run) == before
-    result = runner.invoke(app, _args(tmp_path, "--steps", "1000", "--force"))
+    result = runner.invoke(app, _args(tmp_path, "--steps", "1000", "--force", "--record-trajectories"))
     assert result.exit_code == 0, result.output
     # A fresh run of the same seed: the same episodes, not two runs' mixed.
     assert (run / "trajectories.jsonl").read_text() == episodes

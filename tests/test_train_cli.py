@@ -36,7 +36,7 @@ def test_train_writes_the_run_folder(zoo, tmp_path, mode):
     result = runner.invoke(app, _train_args(zoo, tmp_path, "--mode", mode))
     assert result.exit_code == 0, result.output
     run = tmp_path / "sb3_disagree__ApartmentState-v0" / "bathtub" / f"{mode}-0"
-    for name in ["model.zip", "config.yaml", "progress.csv", "trajectories.jsonl"]:
+    for name in ["model.zip", "config.yaml", "progress.csv"]:
         assert (run / name).exists(), name
     assert list((run / "monitor").glob("*.monitor.csv")) and list(run.glob("events.out.tfevents*"))
     cfg = yaml.safe_load((run / "config.yaml").read_text())
@@ -112,6 +112,11 @@ def test_eval_and_trajectory_picture(zoo, tmp_path):
     assert runner.invoke(app, _train_args(zoo, tmp_path)).exit_code == 0
     run = tmp_path / "sb3_disagree__ApartmentState-v0" / "bathtub" / "disagreement-0"
     png = tmp_path / "traj.png"
+    # Episodes are recorded only when asked.
+    assert not (run / "trajectories.jsonl").exists()
+    result = runner.invoke(app, ["eval", str(run), "--episodes", "3", "--trajectory", str(png)])
+    assert result.exit_code == 2 and "--record-trajectories" in result.output
+    assert runner.invoke(app, _train_args(zoo, tmp_path, "--record-trajectories", "--force")).exit_code == 0
     result = runner.invoke(app, ["eval", str(run), "--episodes", "3", "--trajectory", str(png)])
     assert result.exit_code == 0, result.output
     assert "over 3 episodes" in result.output and png.stat().st_size > 10_000

@@ -43,6 +43,8 @@ from sb3_disagree.training import ACER_KWARGS, RunConfig
 # Experiments shipped with the repository; a path to any YAML file works too.
 SHIPPED = Path(__file__).resolve().parents[1] / "data" / "experiments"
 RESULT = "result.json"
+# RunConfig fields that change what a run writes, not what it learns: a copy (same_as) may differ in them.
+OUTPUT_ONLY = ("record_trajectories", "checkpoint_every")
 # What a continuation must share with the run it continues (everything but the budget).
 SAME = ("goal", "env_id", "mode", "alpha", "beta", "seed", "n_envs", "acer_kwargs")
 
@@ -91,7 +93,8 @@ class Run:
         saved, wanted = result.get("config", {}), asdict(self.config)
         # A field newer than the record ran at its default.
         defaults = {k: f.default for k, f in RunConfig.__dataclass_fields__.items() if f.default is not MISSING}
-        differ = [k for k in wanted if saved.get(k, defaults.get(k)) != wanted[k]]
+        # What a run writes on the side or how often it saves changes nothing it learns.
+        differ = [k for k in wanted if k not in OUTPUT_ONLY and saved.get(k, defaults.get(k)) != wanted[k]]
         if result.get("final_alone", {}).get("episodes") != self.final_episodes:
             differ.append("final_episodes")
         if differ:
@@ -166,6 +169,8 @@ class Experiment:
                 unknown = set(fields) - set(RunConfig.__dataclass_fields__)
                 if unknown:
                     raise ValueError(f"experiment {self.name!r}, cell {cell!r}: unknown run fields {sorted(unknown)}")
+                if self.trajectories:  # the report draws each cell's recorded episodes
+                    fields.setdefault("record_trajectories", True)
                 config = RunConfig(goal=self.goal, env_id=self.env_id, priors=self.priors, steps=self.steps, seed=seed,
                                    acer_kwargs=acer, **fields)
                 config.validate()
