@@ -99,3 +99,14 @@ def test_acer_trains_and_tunes_through_rl_zoo3(tmp_path):
     rows = list(csv.DictReader(report.open()))
     assert len(rows) == 2 and all(r["state"] == "COMPLETE" for r in rows)
     assert {"params_learning_rate", "params_replay_ratio", "params_trust_region"} <= set(rows[0])
+
+
+def test_every_env_documents_gymnasiums_sections():
+    from sb3_disagree.envs.apartment import ApartmentEnv
+    from sb3_disagree.envs.scan import ScanEnv
+
+    sections = ("Description", "Action Space", "Observation Space", "Rewards", "Starting State", "Episode End",
+                "Arguments")
+    for env in (ApartmentEnv, ScanEnv):
+        positions = [env.__doc__.index(f"## {name}") for name in sections]
+        assert positions == sorted(positions), env

@@ -19,11 +19,39 @@ from sb3_disagree.envs.navigation import MAX_EPISODE_STEPS, MOVE_FORWARD, TURN_L
 
 class ApartmentEnv(NavigationEnv):
     """
-    Navigate from a random pose in the corridor to one goal object.
+    ## Description
 
-    Reward per step: the decrease of the Euclidean distance to the goal object, minus ``step_penalty``;
-    ``success_reward`` and termination once the agent is within reach of the goal (MiniWorld's
-    ``near``: bounding circles plus 1.1 forward steps); truncation after ``max_episode_steps``.
+    The apartment of the paper's first experiment: a bedroom, a kitchen and a bathroom off a corridor, with
+    coloured boxes as objects. The agent starts at a random pose in the corridor and must reach one goal
+    object. Registered as ``sb3_disagree/Apartment-v0`` (egocentric RGB) and
+    ``sb3_disagree/ApartmentState-v0`` (pose), both on ``import sb3_disagree``.
+
+    ## Action Space
+
+    ``Discrete(3)``: 0 turn left, 1 turn right (``turn_step`` degrees, 30 by default), 2 move forward
+    (``forward_step`` metres, 0.25 by default; blocked moves leave the agent where it is).
+
+    ## Observation Space
+
+    ``obs="rgb"``: ``Box(0, 255, (obs_height, obs_width, 3), uint8)``, the egocentric MiniWorld render
+    (60x80 by default). ``obs="state"``: ``Box(-1, 1, (4,), float32)``, ``(x / 8, z / 8, cos t, sin t)``.
+
+    ## Rewards
+
+    Each step: the decrease of the Euclidean distance to the goal object, minus ``step_penalty`` (0.01);
+    plus ``success_reward`` (10) on reaching it.
+
+    ## Starting State
+
+    A uniformly random free position in the corridor and a uniformly random heading.
+
+    ## Episode End
+
+    Termination once the agent is within reach of the goal (MiniWorld's ``near``: the bounding circles
+    plus 1.1 forward steps; ``info["is_success"]`` is then true); truncation after ``max_episode_steps``
+    (500). ``info`` also holds ``room``, ``goal_room``, ``position``, ``heading`` and ``distance``.
+
+    ## Arguments
 
     :param goal: Name of the goal object (shower, bathtub, toilet, bed, wardrobe, nightstand, stove,
         toaster, microwave, table)

@@ -42,7 +42,39 @@ def _field(path: str, cell: float, agent_radius: float, x: float, z: float, radi
 
 class ScanEnv(NavigationEnv):
     """
-    Reach a named goal in a scene mesh from a random navigable start.
+    ## Description
+
+    Navigation in a 3D scan (the paper's second experiment, without habitat-sim): reach a named goal in a
+    scene mesh from a random navigable pose. Registered as ``sb3_disagree/Office-v0`` (egocentric RGB) and
+    ``sb3_disagree/OfficeState-v0`` (pose) on the generated office floor; ``scene=`` takes any scan with a
+    goals file.
+
+    ## Action Space
+
+    ``Discrete(3)``, Habitat's: 0 turn left, 1 turn right (``turn_step`` degrees, 30 by default), 2 move
+    forward (``forward_step`` metres, 0.25 by default; blocked moves leave the agent where it is).
+
+    ## Observation Space
+
+    ``obs="rgb"``: ``Box(0, 255, (obs_height, obs_width, 3), uint8)``, rendered by EGL (60x80 by default).
+    ``obs="state"``: ``Box(-1, 1, (4,), float32)``, ``x, z`` scaled by the scene's size, ``cos t, sin t``.
+
+    ## Rewards
+
+    Each step: the decrease of the geodesic distance to the goal (the shortest path through the navigable
+    grid), minus ``step_penalty`` (0.01); plus ``success_reward`` (10) on reaching it.
+
+    ## Starting State
+
+    A uniformly random navigable position anywhere in the scene and a uniformly random heading.
+
+    ## Episode End
+
+    Termination once the agent is within the goal's radius (straight-line distance to the goal point;
+    ``info["is_success"]`` is then true); truncation after ``max_episode_steps`` (500). ``info`` holds the
+    same keys as the apartment's.
+
+    ## Arguments
 
     :param goal: A goal named in the scene's goals file
     :param scene: A .glb/.gltf/.obj/.ply scene with ``<name>.goals.json`` beside it (default: the
