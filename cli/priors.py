@@ -1,6 +1,7 @@
 """``dopt priors ...`` and ``dopt similarity``: the zoo and the choice of priors by language."""
 
 import json
+import time
 from pathlib import Path
 from typing import Optional
 
@@ -27,7 +28,38 @@ def _zoo(path: Optional[Path]):
     return Zoo(path)
 
 
-def _progress() -> Progress:
+class PlainProgress:
+    """rich's Progress where no live bar can draw (a log file, a pipe): a flushed line per task at most every
+    ``interval`` seconds, and one when the task completes."""
+
+    def __init__(self, interval: float = 30.0) -> None:
+        self.interval, self.tasks = interval, {}
+
+    def __enter__(self) -> "PlainProgress":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        return None
+
+    def add_task(self, description: str, total: int) -> int:
+        self.tasks[len(self.tasks)] = dict(description=description, total=total, completed=0,
+                                           start=time.perf_counter(), last=time.perf_counter())
+        return len(self.tasks) - 1
+
+    def advance(self, task: int, amount: int = 1) -> None:
+        self.update(task, completed=self.tasks[task]["completed"] + amount)
+
+    def update(self, task: int, completed: int) -> None:
+        t, now = self.tasks[task], time.perf_counter()
+        t["completed"] = completed
+        if now - t["last"] >= self.interval or completed >= t["total"]:
+            t["last"] = now
+            print(f"{t['description']}: {completed}/{t['total']} | {now - t['start']:.0f}s", flush=True)
+
+
+def _progress():
+    if not console.is_terminal:
+        return PlainProgress()
     return Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
                     console=console, transient=True)
 

@@ -144,6 +144,7 @@ def test_cli_eval_record_rewrites_only_the_evaluation(zoo):
     assert not after.card.evaluation["deterministic"]
     words = " ".join(result.output.split())
     assert "(greedy actions)" in words and "(sampled actions)" in words
+    assert "evaluating bed: 3/3 |" in words  # not a terminal: a plain progress line, not a live bar
     result = runner.invoke(app, ["priors", "eval", "bed", "--episodes", "4", "--record", "--deterministic", *args])
     assert result.exit_code == 0, result.output
     card = zoo.get("bed", STATE_ID).card
