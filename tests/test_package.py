@@ -110,3 +110,46 @@ def test_every_env_documents_gymnasiums_sections():
     for env in (ApartmentEnv, ScanEnv):
         positions = [env.__doc__.index(f"## {name}") for name in sections]
         assert positions == sorted(positions), env
+
+
+def _import_graph():
+    """Every module of the package (the CLI included) -> the package's modules it imports, anywhere in it."""
+    import ast
+    from pathlib import Path
+
+    repo = Path(__file__).resolve().parents[1]
+    files = {}
+    for path in [*(repo / "sb3_disagree").rglob("*.py"), *(repo / "cli").rglob("*.py")]:
+        rel = path.relative_to(repo).with_suffix("").parts
+        name = ".".join(("sb3_disagree", "cli", *rel[1:]) if rel[0] == "cli" else rel).removesuffix(".__init__")
+        files[name] = path
+    graph, private = {}, []
+    for name, path in files.items():
+        graph[name] = set()
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.ImportFrom) and (node.module or "").startswith("sb3_disagree"):
+                targets = [node.module, *(f"{node.module}.{a.name}" for a in node.names)]
+                graph[name] |= {t for t in targets if t in files and t != name}
+                private += [f"{name}: {node.module}.{a.name}" for a in node.names
+                            if a.name.startswith("_") and not a.name.startswith("__")]
+            elif isinstance(node, ast.Import):
+                graph[name] |= {a.name for a in node.names if a.name in files and a.name != name}
+    return graph, private
+
+
+def test_the_package_has_no_import_cycle_and_imports_no_private_name():
+    graph, private = _import_graph()
+    assert not private, private
+    state: dict[str, int] = {}  # 1 on the path, 2 done
+
+    def visit(module, path):
+        state[module] = 1
+        for other in graph[module]:
+            assert state.get(other) != 1, " -> ".join([*path, module, other])
+            if other not in state:
+                visit(other, [*path, module])
+        state[module] = 2
+
+    for module in graph:
+        if module not in state:
+            visit(module, [])

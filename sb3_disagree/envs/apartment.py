@@ -146,9 +146,9 @@ class ApartmentEnv(NavigationEnv):
         return self.layout.blocked(x, z)
 
     def nav_field(self):
-        from sb3_disagree.envs.expert import _field
+        from sb3_disagree.envs.expert import layout_field
 
-        return _field(self.layout, self.goal.name, self.reach)
+        return layout_field(self.layout, self.goal.name, self.reach)
 
     def _sample_pose(self) -> tuple[float, float, float]:
         c, r = self.layout.corridor, self.layout.agent_radius

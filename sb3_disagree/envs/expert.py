@@ -15,7 +15,7 @@ import numpy as np
 
 from sb3_disagree.envs.grid import GridField
 from sb3_disagree.envs.layout import Layout
-from sb3_disagree.envs.navigation import MOVE_FORWARD, TURN_LEFT, TURN_RIGHT, wrap
+from sb3_disagree.envs.actions import MOVE_FORWARD, TURN_LEFT, TURN_RIGHT, wrap
 
 
 class DistanceField(GridField):
@@ -60,7 +60,7 @@ def _blocked_grid(layout: Layout, gx: np.ndarray, gz: np.ndarray, radius: float)
 
 
 @lru_cache(maxsize=64)
-def _field(layout: Layout, goal: str, reach: float) -> DistanceField:
+def layout_field(layout: Layout, goal: str, reach: float) -> DistanceField:
     g = layout.object(goal)
     # Aim a little inside the reach, so that following the field ends in success.
     return DistanceField(layout, g.x, g.z, goal_radius=reach - 0.05, margin=0.1)

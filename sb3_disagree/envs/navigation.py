@@ -10,15 +10,13 @@ from typing import Any, Optional
 import gymnasium as gym
 import numpy as np
 
+from sb3_disagree.envs.actions import MOVE_FORWARD, TURN_LEFT, TURN_RIGHT, Actions, wrap
+
+__all__ = ["MAX_EPISODE_STEPS", "MOVE_FORWARD", "TURN_LEFT", "TURN_RIGHT", "Actions", "NavigationEnv", "wrap"]
+
 # Steps before an episode is truncated, unless an env is made with another max_episode_steps.
 MAX_EPISODE_STEPS = 500
 
-TURN_LEFT, TURN_RIGHT, MOVE_FORWARD = 0, 1, 2
-
-
-def wrap(angle: float) -> float:
-    """An angle in [-pi, pi)."""
-    return (angle + math.pi) % (2 * math.pi) - math.pi
 
 
 class NavigationEnv(gym.Env):
