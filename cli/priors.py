@@ -144,6 +144,8 @@ def add(
         training = {"method": "external", **({"model_card": {k: run.get(k) for k in ("mode", "steps", "seed", "command",
                                                                                     "priors")}} if run else {})}
         z = _zoo(zoo)
+        console.print(f"[yellow]note:[/] loading {model} runs code it may hold (SB3 model files are pickles): add "
+                      "only files you trust (docs/survival.md)")
         entry = z.add(model, goal, env, training=training, command=command_line(), replace=replace)
         if episodes:
             _evaluate_into_card(z, entry, episodes)

@@ -184,7 +184,11 @@ def eval_run(
         if not cfg_path.exists():
             raise FileNotFoundError(f"{cfg_path} is missing: it names the environment and goal to evaluate in")
         cfg = yaml.safe_load(cfg_path.read_text())
-        model = algorithm_of(cfg.get("mode", "disagreement")).load(model_path, device="cpu")
+        algorithm = algorithm_of(cfg.get("mode", "disagreement"))
+        try:
+            model = algorithm.load(model_path, device="cpu")
+        except Exception as exc:  # a damaged file, or another algorithm's
+            raise ValueError(f"{model_path} could not be loaded as {algorithm.__name__}: {exc}") from None
         for greedy in (True, False) if deterministic is None else (deterministic,):
             result = evaluate_alone(model, cfg, episodes, greedy, seed)
             console.print(f"{cfg['goal']}: success {result.success_rate:.2f}, mean length {result.mean_length:.1f}, "

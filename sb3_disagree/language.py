@@ -251,6 +251,9 @@ def load_embedding(path: Optional[Union[str, Path]] = None, format: str = "auto"
         raise ValueError(f"unknown embedding format {format!r}; choose from {', '.join(FORMATS)}")
     if not path.exists():
         raise FileNotFoundError(f"embedding file {path} does not exist")
+    if not path.is_file():
+        raise ValueError(f"the embedding {path} is not a file (a word2vec, GloVe or fastText file, or saved "
+                         "KeyedVectors)")
     fmt = detect_format(path) if format == "auto" else format
     from gensim.models import KeyedVectors
 
@@ -279,6 +282,10 @@ def rank_by_similarity(goal: str, labels: Iterable[str], embedding: Embedding) -
         return []
     v = embedding.vectors([goal_n, *others])
     sims = v[1:] @ v[0]
+    bad = [w for w, row in zip([goal_n, *others], v) if not np.isfinite(row).all() or not np.any(row)]
+    if bad or not np.isfinite(sims).all():
+        raise ValueError(f"the embedding gives {', '.join(map(repr, bad)) or 'some word'} a zero or non-finite "
+                         "vector: no similarity can rank the priors by it")
     return sorted(zip(others, sims.tolist()), key=lambda t: (-round(t[1], 12), t[0]))
 
 

@@ -115,7 +115,9 @@ class RunConfig:
     record_trajectories: bool = False
 
     def validate(self) -> None:
+        self._check_types()
         safe_name(self.goal, "--goal")
+        check_navigation_env(self.env_id)
         safe_name(self.env_id.replace("/", "__"), "--env")
         if self.mode not in MODES:
             raise ValueError(f"--mode must be one of {', '.join(MODES)}, got {self.mode!r}")
@@ -142,8 +144,41 @@ class RunConfig:
         if self.eval_every < 0 or self.eval_episodes < 1:
             raise ValueError("--eval-every must be >= 0 and --eval-episodes positive")
 
+    def _check_types(self) -> None:
+        """Every field of the type it is declared with (a YAML grid or a saved config can hold anything)."""
+        kinds = {int: ((int,), "an integer"), float: ((int, float), "a number"), str: ((str,), "a word"),
+                 bool: ((bool,), "true or false")}
+        for name, spec in self.__dataclass_fields__.items():
+            value = getattr(self, name)
+            if str(spec.type).startswith("dict") and not isinstance(value, dict):
+                raise ValueError(f"{name} must be a mapping, got {value!r}")
+            if spec.type not in kinds or (name in ("embedding", "zoo") and value is None):
+                continue
+            allowed, what = kinds[spec.type]
+            if (isinstance(value, bool) and bool not in allowed) or not isinstance(value, allowed):
+                raise ValueError(f"{name} must be {what}, got {value!r}")
+        if not (self.priors == "auto" or (isinstance(self.priors, (list, tuple))
+                                          and all(isinstance(p, str) for p in self.priors))):
+            raise ValueError(f"priors must be 'auto' or a list of goal words, got {self.priors!r}")
+
     def run_dir(self, out: Path) -> Path:
         return out / self.env_id.replace("/", "__") / self.goal / f"{self.mode}-{self.seed}"
+
+
+def check_navigation_env(env_id: str) -> None:
+    """A ValueError unless ``env_id`` is a registered goal-navigation env (one that takes ``goal=``)."""
+    import gymnasium as gym
+
+    from sb3_disagree.envs.navigation import NavigationEnv
+
+    if env_id not in gym.registry:
+        ours = ", ".join(k for k in gym.registry if k.startswith("sb3_disagree/"))
+        raise ValueError(f"unknown environment {env_id!r}; this package registers {ours}")
+    entry = gym.spec(env_id).entry_point
+    cls = gym.envs.registration.load_env_creator(entry) if isinstance(entry, str) else entry
+    if not (isinstance(cls, type) and issubclass(cls, NavigationEnv)):
+        raise ValueError(f"{env_id} is not a goal-navigation environment of this package (it takes no goal); "
+                         "use one of the sb3_disagree/ environments")
 
 
 def choose_priors(config: RunConfig, env) -> tuple[list[str], list[float], PriorSet]:
@@ -160,6 +195,10 @@ def choose_priors(config: RunConfig, env) -> tuple[list[str], list[float], Prior
         names = list(config.priors)
         if len(names) < 2:
             raise ValueError(f"--priors needs at least two goals, got {names}")
+        if len(set(names)) < len(names):
+            raise ValueError(f"--priors names a goal twice: {', '.join(names)}")
+        if config.goal in names:
+            raise ValueError(f"--priors names the new goal {config.goal!r} itself: the priors are other goals' policies")
         missing = [n for n in names if n not in labels]
         if missing:
             raise ZooError(f"the zoo has no usable prior for {', '.join(missing)} in {config.env_id}")
@@ -393,7 +432,10 @@ def train(config: RunConfig, out: Path = Path("runs"), resume: Optional[Path] = 
             raise ValueError(f"{run_dir} already holds a run: continue it with --resume {run_dir}, or replace it "
                              "with --force")
         shutil.rmtree(run_dir)
-    created = not run_dir.exists()
+    created = run_dir  # the outermost folder this run creates, removed again if the start fails
+    while not created.parent.exists():
+        created = created.parent
+    created = created if not run_dir.exists() else None
     run_dir.mkdir(parents=True, exist_ok=True)
     try:
         env = build_env(config, run_dir, append=resume is not None)
@@ -414,8 +456,8 @@ def train(config: RunConfig, out: Path = Path("runs"), resume: Optional[Path] = 
             remaining = config.steps
             (run_dir / "config.yaml").write_text(yaml.safe_dump(saved_config, sort_keys=False))
     except BaseException:
-        if created:  # a failed start leaves nothing behind
-            shutil.rmtree(run_dir, ignore_errors=True)
+        if created is not None:  # a failed start leaves nothing behind
+            shutil.rmtree(created, ignore_errors=True)
         raise
     model.set_logger(run_logger(run_dir, append=resume is not None))
     own: list[BaseCallback] = []
@@ -488,9 +530,15 @@ def evaluate_alone(model: ACER, config: dict[str, Any], episodes: int, determini
     :return: The :class:`~sb3_disagree.prior_training.Evaluation`
     """
     from sb3_disagree.prior_training import evaluate, make_env
+    from sb3_disagree.zoo import space_fits, space_to_dict
 
     env = make_env(config["env_id"], config["goal"], config.get("env_kwargs") or {}, n_envs=4, seed=seed)
     try:
+        for kind in ("observation", "action"):
+            theirs = getattr(model, f"{kind}_space")
+            if not space_fits(space_to_dict(theirs), getattr(env, f"{kind}_space")):
+                raise ValueError(f"the model acts on {kind}s {space_to_dict(theirs)}, but {config['env_id']} gives "
+                                 f"{space_to_dict(getattr(env, f'{kind}_space'))}: it was trained elsewhere")
         return evaluate(model, env, episodes, deterministic=deterministic)
     finally:
         env.close()

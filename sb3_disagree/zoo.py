@@ -223,7 +223,7 @@ class Zoo:
         out = []
         if not self.root.is_dir():
             return out
-        env_dirs = [self.root / env_dir_name(env_id)] if env_id else sorted(p for p in self.root.iterdir() if p.is_dir())
+        env_dirs = [self.root / env_dir_name(env_id)] if env_id else sorted(p for p in self.root.iterdir() if p.is_dir() and not p.name.startswith("."))
         for env_dir in env_dirs:
             if not env_dir.is_dir():
                 continue

@@ -193,3 +193,50 @@ def test_a_trust_list_outside_the_zoo_refuses_what_is_not_on_it(tmp_path, monkey
         Zoo(zoo).load(untrusted)
     trust.write_text(entry.card.sha256 + "\n")
     assert Zoo(zoo).get("bed", STATE_ID).problem is None
+
+
+@pytest.mark.parametrize("args, words", [
+    (["--env", "CartPole-v1"], "not a goal-navigation environment"),
+    (["--priors", "shower,shower"], "names a goal twice"),
+    (["--priors", "bathtub,shower"], "the new goal 'bathtub' itself"),
+    (["--embedding", "."], "is not a file"),
+    (["--goal", "..", "--steps", "100"], "cannot name a folder"),
+])
+def test_bad_input_is_one_line_and_exit_2_with_nothing_written(tmp_path, args, words):
+    base = ["train", "--goal", "bathtub", "--env", STATE_ID, "--out", str(tmp_path / "out"), "--steps", "100"]
+    for flag in args[::2]:  # the case's own value replaces the default one
+        if flag in base:
+            i = base.index(flag)
+            del base[i:i + 2]
+    result = runner.invoke(app, [*base, *args])
+    assert result.exit_code == 2 and words in " ".join(result.output.split()), result.output
+    assert "Traceback" not in result.output and not (tmp_path / "out").exists()
+
+
+def test_a_grid_with_wrongly_typed_or_negative_values_is_refused(tmp_path):
+    for bad, words in (({"steps": "lots"}, "steps must be a positive integer"),
+                       ({"final_episodes": -5}, "final_episodes must be a positive integer"),
+                       ({"budgets": [-5]}, "budgets must be a list of positive"),
+                       ({"cells": {"a": {"mode": "scratch", "alpha": "x"}}}, "alpha must be an integer")):
+        grid = tmp_path / "g.yaml"
+        grid.write_text(yaml.safe_dump({"goal": "bathtub", "env_id": STATE_ID, "steps": 100,
+                                        "cells": {"a": {"mode": "scratch"}}, **bad}))
+        result = runner.invoke(app, ["experiment", "run", str(grid), "--out", str(tmp_path / "res")])
+        assert result.exit_code == 2 and words in " ".join(result.output.split()), result.output
+        assert not (tmp_path / "res").exists()
+
+
+def test_dopt_eval_refuses_a_model_from_another_env_or_algorithm(tmp_path):
+    assert runner.invoke(app, _args(tmp_path, "--steps", "200")).exit_code == 0
+    run = tmp_path / "sb3_disagree__ApartmentState-v0" / "bathtub" / "disagreement-0"
+    other = tmp_path / "other"
+    other.mkdir()
+    (other / "config.yaml").write_text((run / "config.yaml").read_text())
+    from stable_baselines3 import PPO
+
+    ACER("MlpPolicy", make_vec_env(ChainEnv, n_envs=1)).save(other / "model.zip")
+    result = runner.invoke(app, ["eval", str(other), "--episodes", "2"])
+    assert result.exit_code == 2 and "trained elsewhere" in result.output
+    PPO("MlpPolicy", make_vec_env(STATE_ID, n_envs=1, env_kwargs=dict(goal="bed"))).save(other / "model.zip")
+    result = runner.invoke(app, ["eval", str(other), "--episodes", "2"])
+    assert result.exit_code == 2 and "could not be loaded as ACER" in " ".join(result.output.split())

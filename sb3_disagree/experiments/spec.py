@@ -150,7 +150,31 @@ class Experiment:
                 raise ValueError(f"cells {unknown} are not among {self.name}'s cells {list(self.cells)}")
             self.cells = {c: v for c, v in self.cells.items() if c in cells}
 
+    def check(self) -> None:
+        """The grid's own fields: of their types, counts and budgets positive."""
+        def positive_ints(values: Any) -> bool:
+            return isinstance(values, list) and all(isinstance(v, int) and not isinstance(v, bool) and v >= 0
+                                                    for v in values)
+
+        if not isinstance(self.goal, str):
+            raise ValueError(f"experiment {self.name!r}: goal must be a word, got {self.goal!r}")
+        for name in ("steps", "final_episodes"):
+            value = getattr(self, name)
+            if not isinstance(value, int) or isinstance(value, bool) or value < 1:
+                raise ValueError(f"experiment {self.name!r}: {name} must be a positive integer, got {value!r}")
+        if not positive_ints(self.seeds) or not self.seeds:
+            raise ValueError(f"experiment {self.name!r}: seeds must be a list of integers >= 0, got {self.seeds!r}")
+        if not positive_ints(self.budgets) or any(b < 1 for b in self.budgets):
+            raise ValueError(f"experiment {self.name!r}: budgets must be a list of positive step counts, "
+                             f"got {self.budgets!r}")
+        for name in ("run", "acer", "cells"):
+            if not isinstance(getattr(self, name), dict):
+                raise ValueError(f"experiment {self.name!r}: {name} must be a mapping, got {getattr(self, name)!r}")
+        if not isinstance(self.trajectories, bool):
+            raise ValueError(f"experiment {self.name!r}: trajectories must be true or false")
+
     def runs(self) -> list[Run]:
+        self.check()
         out = []
         # Seed-major order: an experiment stopped early has every cell for its first seeds.
         for seed in self.seeds:
