@@ -18,7 +18,8 @@ from typing import Optional
 import yaml
 from docs_section import DOCS, write_section
 
-from sb3_disagree.experiments.report import plot, ratio_markdown, seeds_markdown, summarize, table_markdown
+from sb3_disagree.experiments.report import (alone_markdown, plot, ratio_markdown, seeds_markdown, summarize,
+                                             table_markdown)
 from sb3_disagree.experiments.spec import load_experiment
 
 ROOT = Path(__file__).resolve().parent / "results" / "experiments"
@@ -78,6 +79,11 @@ def main(name: str, only_seeds: Optional[list[int]] = None, note: str = "") -> N
             "in brackets.\n\n"
             f"Per seed, read from each seed's own training curve (the same 50-episode window):\n\n"
             f"{seeds_markdown(summaries)}\n")
+    alone = alone_markdown(summaries)
+    if alone is not None:
+        body += ("\nThe new policy alone along the way (each run's periodic evaluation, "
+                 f"{run_cfg.get('eval_episodes', 20)} episodes each way, mean over the seeds), greedy / sampled:\n\n"
+                 f"{alone}\n")
     ratio = ratio_markdown(grid, summaries)
     if ratio is not None:
         body += ("\nSteps to 90% training success with disagreement options over those from scratch, per seed and "

@@ -235,3 +235,20 @@ def test_shipped_experiments_load():
     assert {"fig3-bathtub", "fig3-nightstand", "fig5-trajectories", "fig6-beta", "fig7-alpha", "fig9-office"} <= names
     for name in names:
         assert load_experiment(name).runs()
+
+
+def test_the_policy_alone_table_reads_greedy_and_sampled_at_each_evaluation():
+    from sb3_disagree.experiments.report import alone_markdown
+
+    nan = np.full(3, np.nan)
+
+    def cell(name, greedy):
+        return CellSummary(cell=name, seeds=[0], mean=nan, low=nan, high=nan, usage=nan, steps_to_50=None,
+                           steps_to_90=None, at_budgets={}, auc=0.0, final_alone=0.0, final_alone_seeds=[], fps=0.0,
+                           alone_steps=np.array([25_000, 50_000]), alone_mean=np.array([0.2, 0.9]),
+                           alone_greedy=np.array(greedy))
+
+    assert alone_markdown([cell("old", [])]) is None  # runs that measured no greedy evaluation
+    rows = alone_markdown([cell("finetune", [0.0, 0.5]), cell("old", [])]).splitlines()
+    assert rows[0] == "| cell | 25k greedy / sampled | 50k greedy / sampled |"
+    assert rows[2:] == ["| finetune | 0.00 / 0.20 | 0.50 / 0.90 |"]

@@ -126,6 +126,24 @@ def table_markdown(experiment: Experiment, summaries: list[CellSummary]) -> str:
     return "\n".join(lines)
 
 
+def alone_markdown(summaries: list[CellSummary]) -> Optional[str]:
+    """
+    The new policy alone along the way (the runs' periodic evaluations, mean over seeds), greedy / sampled at
+    each evaluation step; None when no cell measured greedy actions.
+    """
+    cells = [s for s in summaries if len(s.alone_greedy)]
+    if not cells:
+        return None
+    steps = sorted({int(t) for s in cells for t in s.alone_steps[:len(s.alone_greedy)]})
+    lines = ["| cell | " + " | ".join(f"{_steps(t)} greedy / sampled" for t in steps) + " |",
+             "|---" * (len(steps) + 1) + "|"]
+    for s in cells:
+        at = {int(t): (g, m) for t, g, m in zip(s.alone_steps, s.alone_greedy, s.alone_mean)}
+        lines.append(f"| {s.cell} | " + " | ".join(f"{at[t][0]:.2f} / {at[t][1]:.2f}" if t in at else "-"
+                                                    for t in steps) + " |")
+    return "\n".join(lines)
+
+
 def seeds_markdown(summaries: list[CellSummary]) -> str:
     """Per seed: training success at the end of the run, and the step where it first reached 90%."""
     lines = ["| cell | seeds | training success at the end | steps to 90% |", "|---|---|---|---|"]
