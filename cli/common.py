@@ -8,12 +8,12 @@ import typer
 from rich.console import Console
 from rich.markup import escape
 
+from sb3_disagree.defaults import DEFAULT_ENV  # noqa: F401  (the one definition, for the commands)
 from sb3_disagree.language import NotEnoughPriorsError, UnknownWordError
 from sb3_disagree.zoo import ZooError
 
 console = Console()
 err_console = Console(stderr=True)
-DEFAULT_ENV = "sb3_disagree/Apartment-v0"
 # Errors a user can cause with their input: a message and exit code 2, never a traceback.
 USER_ERRORS = (ZooError, UnknownWordError, NotEnoughPriorsError, FileNotFoundError, KeyError, ValueError)
 

@@ -10,15 +10,14 @@ from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, T
 from rich.table import Table
 
 from sb3_disagree.cli.common import DEFAULT_ENV, clean_errors, command_line, console
+from sb3_disagree.defaults import PRIOR_CARD_SEED as CARD_SEED
+from sb3_disagree.defaults import PRIOR_VALIDATION_SEED as VALIDATION_SEED
 from sb3_disagree.language import load_embedding, rank_by_similarity
 
 app = typer.Typer(help="The prior zoo: list, show, add, remove, evaluate and train priors.", no_args_is_help=True)
 
 ZOO_OPT = typer.Option(None, "--zoo", help="Zoo folder (default: the shipped zoo).")
 ENV_OPT = typer.Option(DEFAULT_ENV, "--env", help="Gymnasium id of the environment.")
-# The card's evaluation episodes start at this env seed, DAgger's validation episodes at the second:
-# neither meets the starts a prior trains on, nor each other.
-CARD_SEED, VALIDATION_SEED = 10_000, 20_000
 EMB_OPT = typer.Option(None, "--embedding", help="Word vectors (word2vec/GloVe/fastText/KeyedVectors); default MiniLM.")
 
 
@@ -208,48 +207,30 @@ def train(
     replace: bool = typer.Option(False, "--replace", help="Replace an existing prior for this goal."),
     zoo: Optional[Path] = ZOO_OPT,
 ) -> None:
-    """Train a prior for a goal and add it to the zoo with its card."""
+    """Train a prior for a goal and add it to the zoo with its card (sb3_disagree.prior_training.make_prior)."""
     with clean_errors():
-        import tempfile
+        from sb3_disagree.prior_training import make_prior
 
-        from sb3_disagree.prior_training import METHODS, make_env, train_dagger, train_rl
-
-        if method not in METHODS:
-            raise ValueError(f"--method must be one of {', '.join(METHODS)}, got {method!r}")
-        z = _zoo(zoo)
-        if not replace and any(e.goal == goal for e in z.entries(env)):
-            raise ValueError(f"the zoo already has a prior for {goal!r} in {env}; pass --replace to retrain it")
-        if validation_episodes < 0:
-            raise ValueError(f"--validation-episodes must be >= 0, got {validation_episodes}")
-        venv = make_env(env, goal, n_envs=n_envs, seed=seed)
-        if method == "dagger":
-            validation_env = (make_env(env, goal, n_envs=n_envs, seed=VALIDATION_SEED) if validation_episodes else None)
-            with _progress() as progress:
-                task = progress.add_task(f"DAgger {goal}", total=rounds)
-                model, record = train_dagger(venv, seed=seed, rounds=rounds, steps_per_round=steps_per_round,
-                                             epochs=epochs, final_epochs=final_epochs, validation_env=validation_env,
-                                             validation_episodes=validation_episodes, validation_seed=VALIDATION_SEED,
-                                             learner_actions=learner_actions,
-                                             progress=lambda line: (progress.advance(task), console.print(line)))
-        else:
-            model, record = train_rl(venv, method, steps, seed=seed, progress_bar=True)
-        with tempfile.TemporaryDirectory() as tmp:
-            model.save(Path(tmp) / "model.zip")
-            entry = z.add(Path(tmp) / "model.zip", goal, env, training=record, command=command_line(), replace=replace)
-        _evaluate_into_card(z, entry, episodes)
+        dagger = dict(rounds=rounds, steps_per_round=steps_per_round, epochs=epochs, final_epochs=final_epochs,
+                      validation_episodes=validation_episodes, learner_actions=learner_actions) if method == "dagger" else {}
+        with _progress() as progress:
+            task = progress.add_task(f"{method} {goal}", total=rounds if method == "dagger" else 1)
+            entry, evaluations = make_prior(_zoo(zoo), goal, env, method=method, steps=steps, n_envs=n_envs, seed=seed,
+                                            episodes=episodes, replace=replace, command=command_line(),
+                                            progress=lambda line: (progress.advance(task), console.print(line)),
+                                            **dagger)
+        for label, result in evaluations.items():
+            console.print(f"{goal}: success {result.success_rate:.2f} over {result.episodes} episodes ({label}), "
+                          f"mean length {result.mean_length:.1f}")
 
 
 def _evaluate(z, entry, episodes: int, deterministic: bool, seed: int):
-    """Run a zoo entry alone for some episodes on 4 envs seeded from ``seed``."""
-    from sb3_disagree.prior_training import evaluate, make_env
+    """Run a zoo entry alone for some episodes on 4 envs seeded from ``seed``, with a progress display."""
+    from sb3_disagree.prior_training import evaluate_entry
 
-    venv = make_env(entry.env_id, entry.goal, entry.card.env_kwargs if entry.card else {}, n_envs=4, seed=seed)
-    model = z.load(entry, venv, device="cpu")
     with _progress() as progress:
         task = progress.add_task(f"evaluating {entry.goal}", total=episodes)
-        result = evaluate(model, venv, episodes, deterministic, lambda n: progress.update(task, completed=n))
-    venv.close()
-    return result
+        return evaluate_entry(z, entry, episodes, deterministic, seed, lambda n: progress.update(task, completed=n))
 
 
 def _evaluate_into_card(z, entry, episodes: int) -> None:

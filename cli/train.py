@@ -165,7 +165,8 @@ def eval_run(
     episodes: int = typer.Option(100, "--episodes"),
     deterministic: Optional[bool] = typer.Option(None, "--deterministic/--stochastic", help="Only greedy or only "
                                                  "sampled actions [default: both, side by side]."),
-    seed: int = typer.Option(20_000, "--seed"),
+    seed: Optional[int] = typer.Option(None, "--seed", help="Env seed of the first evaluation env [default: the "
+                                       "run's seed + 20000, as the run's own final evaluation]."),
     trajectory: Optional[Path] = typer.Option(None, "--trajectory", help="Draw the run's recorded episodes (PNG)."),
     episode: int = typer.Option(-1, "--episode", help="Which recorded episode to draw (-1: the last)."),
 ) -> None:
@@ -173,7 +174,7 @@ def eval_run(
     with clean_errors():
         import yaml
 
-        from sb3_disagree.training import algorithm_of, evaluate_alone
+        from sb3_disagree.training import FINAL_EVAL_SEED_OFFSET, algorithm_of, evaluate_alone
 
         path = Path(run_or_model)
         run_dir = path if path.is_dir() else path.parent
@@ -190,7 +191,8 @@ def eval_run(
         except Exception as exc:  # a damaged file, or another algorithm's
             raise ValueError(f"{model_path} could not be loaded as {algorithm.__name__}: {exc}") from None
         for greedy in (True, False) if deterministic is None else (deterministic,):
-            result = evaluate_alone(model, cfg, episodes, greedy, seed)
+            first = cfg.get("seed", 0) + FINAL_EVAL_SEED_OFFSET if seed is None else seed
+            result = evaluate_alone(model, cfg, episodes, greedy, first)
             console.print(f"{cfg['goal']}: success {result.success_rate:.2f}, mean length {result.mean_length:.1f}, "
                           f"mean return {result.mean_return:.2f} over {episodes} episodes "
                           f"({'greedy' if greedy else 'sampled'} actions, no priors)")

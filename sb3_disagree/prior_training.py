@@ -19,6 +19,7 @@ from stable_baselines3.common.preprocessing import is_image_space
 from stable_baselines3.common.vec_env import VecEnv
 
 from sb3_disagree.acer import ACER
+from sb3_disagree.defaults import PRIOR_VALIDATION_SEED
 
 METHODS = ("dagger", "acer", "ppo")
 # Small image networks keep a zoo of ten priors well under 60 MB.
@@ -92,7 +93,7 @@ def train_dagger(
     final_epochs: int = 0,
     validation_env: Optional[VecEnv] = None,
     validation_episodes: int = 0,
-    validation_seed: int = 20_000,
+    validation_seed: int = PRIOR_VALIDATION_SEED,
     learner_actions: str = "sampled",
     progress: Optional[Callable[[str], None]] = None,
 ) -> tuple[ACER, dict[str, Any]]:
@@ -236,3 +237,72 @@ def train_rl(env: VecEnv, method: str, steps: int, seed: int = 0, progress_bar: 
         raise ValueError(f"method must be one of {', '.join(METHODS)}, got {method!r}")
     model.learn(steps, progress_bar=progress_bar)
     return model, {"method": method, "steps": steps, "seed": seed, "seconds": round(time.perf_counter() - start, 1)}
+
+
+def evaluate_entry(zoo: Any, entry: Any, episodes: int, deterministic: bool, seed: int,
+                   progress: Optional[Callable[[int], None]] = None) -> Evaluation:
+    """
+    A zoo entry alone for some episodes on 4 envs seeded from ``seed``.
+
+    :param zoo: The :class:`~sb3_disagree.zoo.Zoo`
+    :param entry: Its entry
+    :param episodes: Number of episodes
+    :param deterministic: Greedy actions if True, sampled otherwise
+    :param seed: Env seed of the first env
+    :param progress: Called with the number of finished episodes
+    """
+    venv = make_env(entry.env_id, entry.goal, entry.card.env_kwargs if entry.card else {}, n_envs=4, seed=seed)
+    try:
+        return evaluate(zoo.load(entry, venv, device="cpu"), venv, episodes, deterministic, progress)
+    finally:
+        venv.close()
+
+
+def make_prior(zoo: Any, goal: str, env_id: str, method: str = "dagger", steps: int = 200_000, n_envs: int = 4,
+               seed: int = 0, episodes: int = 100, replace: bool = False, command: str = "",
+               progress: Optional[Callable[[str], None]] = None, **dagger_kwargs: Any) -> tuple[Any, dict[str, Any]]:
+    """
+    Train a prior, add it to the zoo, and record its evaluation alone (greedy and sampled) on its card: what
+    ``dopt priors train`` does, in one call.
+
+    :param zoo: The :class:`~sb3_disagree.zoo.Zoo` to add it to
+    :param goal: The goal it learns to reach
+    :param env_id: The environment
+    :param method: "dagger" (imitate the env's expert), "acer" or "ppo"
+    :param steps: Env steps for acer/ppo
+    :param n_envs: Parallel envs
+    :param seed: Seed of the policy and the rollouts
+    :param episodes: Evaluation episodes each way for the card (0: none)
+    :param replace: Replace an existing prior for this goal
+    :param command: The command that made it, for the card
+    :param progress: Called with a line of text as training goes (DAgger's rounds)
+    :param dagger_kwargs: :func:`train_dagger`'s own settings (rounds, epochs, validation_episodes, ...)
+    :return: The zoo entry (as read back) and the evaluations by label ("greedy", "sampled")
+    """
+    import tempfile
+    from pathlib import Path
+
+    from sb3_disagree.defaults import PRIOR_CARD_SEED, PRIOR_VALIDATION_SEED
+
+    if method not in METHODS:
+        raise ValueError(f"--method must be one of {', '.join(METHODS)}, got {method!r}")
+    if not replace and any(e.goal == goal for e in zoo.entries(env_id)):
+        raise ValueError(f"the zoo already has a prior for {goal!r} in {env_id}; pass --replace to retrain it")
+    if dagger_kwargs.get("validation_episodes", 0) < 0:
+        raise ValueError(f"--validation-episodes must be >= 0, got {dagger_kwargs['validation_episodes']}")
+    venv = make_env(env_id, goal, n_envs=n_envs, seed=seed)
+    if method == "dagger":
+        validation = dagger_kwargs.get("validation_episodes", 0)
+        validation_env = make_env(env_id, goal, n_envs=n_envs, seed=PRIOR_VALIDATION_SEED) if validation else None
+        model, record = train_dagger(venv, seed=seed, validation_env=validation_env,
+                                     validation_seed=PRIOR_VALIDATION_SEED, progress=progress, **dagger_kwargs)
+    else:
+        model, record = train_rl(venv, method, steps, seed=seed, progress_bar=progress is not None)
+    with tempfile.TemporaryDirectory() as tmp:
+        model.save(Path(tmp) / "model.zip")
+        entry = zoo.add(Path(tmp) / "model.zip", goal, env_id, training=record, command=command, replace=replace)
+    evaluations = {}
+    for label in ("greedy", "sampled") if episodes else ():
+        evaluations[label] = evaluate_entry(zoo, entry, episodes, label == "greedy", PRIOR_CARD_SEED)
+        entry = zoo.record_evaluation(entry, {**evaluations[label].as_dict(), "seed": PRIOR_CARD_SEED})
+    return entry, evaluations

@@ -30,10 +30,7 @@ from sb3_disagree.checkpoints import Checkpoint, latest_checkpoint, save_checkpo
 from sb3_disagree.files import safe_name, write_atomic
 from sb3_disagree.options import MODES, PriorSet, make_options
 
-DEFAULT_ENV = "sb3_disagree/Apartment-v0"
-# Env seeds of the evaluations, offsets from the run's seed: the training envs use seed .. seed + n_envs - 1.
-EVAL_SEED_OFFSET = 10_000  # the periodic evaluations along a run
-FINAL_EVAL_SEED_OFFSET = 20_000  # the evaluation after a run
+from sb3_disagree.defaults import DEFAULT_ENV, EVAL_SEED_OFFSET, FINAL_EVAL_SEED_OFFSET  # noqa: F401  (re-exported)
 # Kickstarting's distillation: weight 1 on every state, falling linearly to 0 at 50k env steps.
 KICKSTART: dict[str, Any] = dict(distill_coef=1.0, distill_steps=50_000, distill_states="all")
 # SB3's PPO for the "ppo" mode: rl-zoo3's Atari settings with the runs' 4 envs (benchmarks/hyperparams/ppo.yml);
