@@ -240,3 +240,24 @@ def test_dopt_eval_refuses_a_model_from_another_env_or_algorithm(tmp_path):
     PPO("MlpPolicy", make_vec_env(STATE_ID, n_envs=1, env_kwargs=dict(goal="bed"))).save(other / "model.zip")
     result = runner.invoke(app, ["eval", str(other), "--episodes", "2"])
     assert result.exit_code == 2 and "could not be loaded as ACER" in " ".join(result.output.split())
+
+
+def test_after_load_the_behaviours_first_infos_describe_the_reset_observations(tmp_path):
+    from sb3_disagree.behaviour import BehaviourPolicy, BehaviourStep
+
+    class Infos(BehaviourPolicy):
+        def __init__(self):
+            self.first = None
+
+        def __call__(self, observations, probs, infos, episode_starts):
+            if self.first is None:
+                self.first = [dict(i) for i in infos]
+            return BehaviourStep(th.multinomial(probs, 1).squeeze(-1), probs)
+
+    env = make_vec_env(STATE_ID, n_envs=2, env_kwargs=dict(goal="bathtub"))
+    ACER("MlpPolicy", env, n_steps=5).learn(20)
+    ACER("MlpPolicy", env, n_steps=5).save(tmp_path / "m.zip")
+    behaviour = Infos()
+    model = ACER.load(tmp_path / "m.zip", env=env, behaviour=behaviour)
+    model.learn(10, reset_num_timesteps=False)
+    assert all("room" in info for info in behaviour.first), behaviour.first

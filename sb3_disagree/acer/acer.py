@@ -471,10 +471,12 @@ class ACER(BaseAlgorithm):
         :return: The trained model
         """
         iteration = 0
+        fresh = self._last_obs is None  # a new or loaded model: _setup_learn resets the env
         total_timesteps, callback = self._setup_learn(total_timesteps, callback, reset_num_timesteps, tb_log_name, progress_bar)
-        if reset_num_timesteps:
+        if reset_num_timesteps or fresh:
             self._last_stack = None  # rebuilt from the reset observations
-        if reset_num_timesteps or len(self._last_infos) != self.n_envs:
+        # The behaviour's first infos describe the reset observations (after ACER.load too, where the env was reset).
+        if reset_num_timesteps or fresh or len(self._last_infos) != self.n_envs:
             reset_infos = getattr(self.env, "reset_infos", None)
             self._last_infos = [dict(i) for i in reset_infos] if reset_infos else [{} for _ in range(self.n_envs)]
         self.behaviour_policy.setup(self)
