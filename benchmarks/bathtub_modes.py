@@ -30,7 +30,7 @@ def _run(args: tuple) -> str:
     import torch as th
 
     th.set_num_threads(1)
-    from sb3_disagree.training import RunConfig, train
+    from sb3_disagree.run import RunConfig, train
 
     config = RunConfig(goal="bathtub", mode=mode, priors=["shower", "toilet"], seed=seed, steps=steps)
     run_dir, model, _ = train(config, ROOT)
@@ -99,7 +99,7 @@ def cmd_report(args: argparse.Namespace) -> None:
     body = f"""Command: `python benchmarks/bathtub_modes.py run --seeds {' '.join(sorted(seeds_seen))} --steps {args.steps} --jobs 2 &&
 python benchmarks/bathtub_modes.py report --steps {args.steps}`. Machine: {platform.machine()}, {os.cpu_count()} cores, two runs
 at a time, one torch thread each. Apartment RGB 60x80, 4 envs, ACER CnnPolicy with the defaults of
-`sb3_disagree.training.ACER_KWARGS`, alpha 10, beta 0.1; priors from the shipped zoo.
+`sb3_disagree.run.ACER_KWARGS`, alpha 10, beta 0.1; priors from the shipped zoo.
 
 ![bathtub modes](images/bathtub_modes.png)
 

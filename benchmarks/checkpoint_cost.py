@@ -15,7 +15,7 @@ from stable_baselines3.common.env_util import make_vec_env
 import sb3_disagree  # noqa: F401  (registers the envs)
 from sb3_disagree import ACER
 from sb3_disagree.checkpoints import save_checkpoint
-from sb3_disagree.training import ACER_KWARGS
+from sb3_disagree.run import ACER_KWARGS
 
 th.set_num_threads(1)
 pathlib.Path("runs").mkdir(exist_ok=True)

@@ -28,7 +28,7 @@ SEED = 50_000  # starts no training or evaluation of the runs used
 def success_alone(run_dir: Path, episodes: int) -> tuple[float, float]:
     """Success of the run's model alone with sampled and with greedy actions."""
     from sb3_disagree.acer import ACER
-    from sb3_disagree.training import evaluate_alone
+    from sb3_disagree.run import evaluate_alone
 
     config = yaml.safe_load((run_dir / "config.yaml").read_text())
     model = ACER.load(run_dir / "model.zip", device="cpu")

@@ -70,7 +70,7 @@ def main() -> None:
     parser.add_argument("--write", action="store_true", help="write the table into docs/benchmarks.md")
     args = parser.parse_args()
     th.set_num_threads(args.threads)
-    from sb3_disagree.training import RunConfig, train
+    from sb3_disagree.run import RunConfig, train
 
     profiled = ProfileAfter(args.warm)
     with TemporaryDirectory() as tmp:

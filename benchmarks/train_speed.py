@@ -38,7 +38,7 @@ class Rate(BaseCallback):
 
 
 def acer_rate(mode: str, steps: int, warm: int, vec_env: str, overlap: bool = False) -> float:
-    from sb3_disagree.training import RunConfig, train
+    from sb3_disagree.run import RunConfig, train
 
     with TemporaryDirectory() as tmp:
         rate = Rate(warm)
@@ -51,7 +51,7 @@ def acer_rate(mode: str, steps: int, warm: int, vec_env: str, overlap: bool = Fa
 def ppo_rate(steps: int, warm: int, vec_env: str) -> float:
     from stable_baselines3 import PPO
 
-    from sb3_disagree.training import RunConfig, build_env
+    from sb3_disagree.run import RunConfig, build_env
 
     env = build_env(RunConfig(goal="bathtub", vec_env=vec_env), None)  # the envs dopt train makes
     # rl-zoo3's Atari settings for PPO, with 4 envs.

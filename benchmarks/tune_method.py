@@ -1,5 +1,5 @@
 """
-Try settings of the method on one goal: each variant is a run of ``sb3_disagree.training.train`` with
+Try settings of the method on one goal: each variant is a run of ``sb3_disagree.run.train`` with
 some RunConfig fields or ACER hyperparameters overridden, evaluated alone (no priors) along the way.
 
     python benchmarks/tune_method.py --name ent05 --steps 60000 --set acer.ent_coef=0.05 --set beta=0.1
@@ -100,7 +100,7 @@ def main() -> None:
     parser.add_argument("--set", action="append", default=[], help="FIELD=VALUE or acer.KEY=VALUE")
     args = parser.parse_args()
     th.set_num_threads(1)
-    from sb3_disagree.training import ACER_KWARGS, RunConfig, train
+    from sb3_disagree.run import ACER_KWARGS, RunConfig, train
 
     fields, acer = parse_sets(args.set)
     config = RunConfig(goal=args.goal, mode=args.mode, priors=args.priors.split(","), seed=args.seed, steps=args.steps,

@@ -89,7 +89,7 @@ def train(
 ) -> None:
     """Train a policy for a new goal with disagreement options (or the room sensor, or from scratch)."""
     with clean_errors():
-        from sb3_disagree.training import RunConfig, train as run, write_card
+        from sb3_disagree.run import RunConfig, train as run, write_card
 
         config = RunConfig(goal=goal, env_id=env, mode=mode,
                            priors="auto" if priors == "auto" else [p.strip() for p in priors.split(",") if p.strip()],
@@ -141,7 +141,7 @@ def _refuse_ignored_flags(config, resume: Path, force: bool) -> None:
     import yaml
     from dataclasses import fields
 
-    from sb3_disagree.training import RunConfig
+    from sb3_disagree.run import RunConfig
 
     if force:
         raise ValueError("--force replaces a run and --resume continues one: choose one")
@@ -174,7 +174,7 @@ def eval_run(
     with clean_errors():
         import yaml
 
-        from sb3_disagree.training import FINAL_EVAL_SEED_OFFSET, algorithm_of, evaluate_alone
+        from sb3_disagree.run import FINAL_EVAL_SEED_OFFSET, algorithm_of, evaluate_alone
 
         path = Path(run_or_model)
         run_dir = path if path.is_dir() else path.parent

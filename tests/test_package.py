@@ -34,8 +34,10 @@ def test_the_wheel_works_alone_from_another_folder(tmp_path):
 
     repo = Path(__file__).resolve().parents[1]
     dist = tmp_path / "dist"
+    # Nothing of this process's own path may leak into the commands (the wheel's copy must be what imports).
+    env = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}
     build = subprocess.run([sys.executable, "-m", "pip", "wheel", "--no-deps", "--no-build-isolation", "-q", "-w",
-                            str(dist), str(repo)], capture_output=True, text=True, timeout=300)
+                            str(dist), str(repo)], capture_output=True, text=True, timeout=300, env=env)
     assert build.returncode == 0, build.stderr
     (wheel,) = dist.glob("sb3_disagree-*.whl")
     assert wheel.stat().st_size < 60e6
@@ -48,11 +50,10 @@ def test_the_wheel_works_alone_from_another_folder(tmp_path):
     ours = {sysconfig.get_paths()["purelib"], *site.getsitepackages()}
     (Path(purelib) / "outer.pth").write_text("\n".join(sorted(ours)) + "\n")
     install = subprocess.run([str(python), "-m", "pip", "install", "--no-deps", "--no-index", "-q", str(wheel)],
-                             capture_output=True, text=True, timeout=300)
+                             capture_output=True, text=True, timeout=300, env=env)
     assert install.returncode == 0, install.stderr
     work = tmp_path / "elsewhere"
     work.mkdir()
-    env = {**os.environ, "PYTHONPATH": ""}
     dopt = str(venv / "bin" / "dopt")
 
     def run(*args):

@@ -10,7 +10,7 @@ from typer.testing import CliRunner
 import sb3_disagree.envs  # noqa: F401
 from sb3_disagree import ACER
 from sb3_disagree.cli.app import app
-from sb3_disagree.training import RunConfig, train
+from sb3_disagree.run import RunConfig, train
 
 STATE_ID = "sb3_disagree/ApartmentState-v0"
 runner = CliRunner()
@@ -52,7 +52,7 @@ def test_train_writes_the_run_folder(zoo, tmp_path, mode):
         assert ("train/distill_loss" in header) == (mode == "kickstart")
         assert ("jsrl/horizon" in header) == (mode == "jsrl")
     # The trained model opens with plain SB3 tools, no priors or zoo needed.
-    from sb3_disagree.training import algorithm_of
+    from sb3_disagree.run import algorithm_of
 
     model = algorithm_of(mode).load(run / "model.zip")
     env = make_vec_env(STATE_ID, n_envs=1, env_kwargs=dict(goal="bathtub"))
@@ -219,7 +219,7 @@ def test_unknown_goal_word_and_too_few_priors(zoo, tmp_path):
 def test_the_ppo_modes_settings_are_the_published_hyperparameters_file():
     from pathlib import Path
 
-    from sb3_disagree.training import PPO_KWARGS
+    from sb3_disagree.run import PPO_KWARGS
 
     published = yaml.safe_load((Path(__file__).parents[1] / "benchmarks/hyperparams/ppo.yml").read_text())
     entry = dict(published["sb3_disagree/Apartment-v0"])

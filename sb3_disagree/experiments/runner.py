@@ -62,7 +62,7 @@ def train_and_evaluate(run: Run, folder: Path, source: Optional[Path] = None,
     # One torch thread per run, as several share a machine; an overlapped run works in two threads, and its
     # on-policy update (while the other thread is idle) may use both.
     th.set_num_threads(2 if run.config.overlap else 1)
-    from sb3_disagree.training import FINAL_EVAL_SEED_OFFSET, evaluate_alone, train
+    from sb3_disagree.run import FINAL_EVAL_SEED_OFFSET, evaluate_alone, train
 
     begun = _start_from(source, folder) if source is not None else 0
     start = time.perf_counter()

@@ -38,7 +38,7 @@ from typing import Any, Optional
 import yaml
 
 from sb3_disagree.files import safe_name
-from sb3_disagree.training import ACER_KWARGS, RunConfig
+from sb3_disagree.run import ACER_KWARGS, RunConfig
 
 # Experiments shipped with the repository; a path to any YAML file works too.
 SHIPPED = Path(__file__).resolve().parents[1] / "data" / "experiments"

@@ -1,0 +1,157 @@
+"""A run's configuration: ``RunConfig`` (saved as the run's ``config.yaml``) and the defaults of each mode."""
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Optional
+
+from sb3_disagree.defaults import DEFAULT_ENV
+from sb3_disagree.files import safe_name
+from sb3_disagree.options import MODES
+
+# Kickstarting's distillation: weight 1 on every state, falling linearly to 0 at 50k env steps.
+KICKSTART: dict[str, Any] = dict(distill_coef=1.0, distill_steps=50_000, distill_states="all")
+# SB3's PPO for the "ppo" mode: rl-zoo3's Atari settings with the runs' 4 envs (benchmarks/hyperparams/ppo.yml);
+# learning rate and clip range fall linearly to 0 over the budget, as rl-zoo3's "lin_" values.
+PPO_KWARGS: dict[str, Any] = dict(n_steps=128, n_epochs=4, batch_size=256, learning_rate=2.5e-4, clip_range=0.1,
+                                  ent_coef=0.01, vf_coef=0.5)
+# ACER on the apartment: images through NatureCNN; a buffer of 50k frames is 0.7 GB of uint8. Rewards scaled
+# by 0.1 (Q in units of the +10 goal / 10): at scale 1 the policy's entropy collapsed by 20k steps and the
+# new policy alone fell back to ~0 success; at 0.1 it trains stably (docs/results.md, "Choosing ACER's scale").
+ACER_KWARGS: dict[str, Any] = dict(n_steps=20, buffer_size=50_000, replay_start=2_000, replay_ratio=4, ent_coef=0.01,
+                                   learning_rate=7e-4, reward_scale=0.1)
+
+
+@dataclass
+class RunConfig:
+    """
+    Everything that defines a run; saved as the run's ``config.yaml``.
+
+    :param goal: The new goal word
+    :param env_id: Gymnasium id of the environment
+    :param mode: "disagreement", "room-sensor", "scratch", "finetune" (ACER from the most similar prior's weights,
+        no behaviour), "kickstart" (the new policy acts alone, distilled toward the priors' mixture on every
+        state with a weight annealed to zero: ``KICKSTART`` unless ``acer_kwargs`` say otherwise), "jsrl"
+        (Jump-Start RL: the priors guide each episode's first steps, fewer as the new policy succeeds) or
+        "ppo" (SB3's PPO from scratch, ``PPO_KWARGS``)
+    :param priors: "auto" (by similarity) or the goal labels of the priors
+    :param alpha: Disagreement window
+    :param beta: Disagreement threshold (>= 0)
+    :param entropy_offset: Entropy offset of the prior branch
+    :param steps: Env steps to train
+    :param seed: Seed
+    :param n_envs: Parallel envs
+    :param embedding: Word vectors file; None for the default
+    :param zoo: Zoo folder; None for the shipped one
+    :param acer_kwargs: ACER's hyperparameters
+    :param env_kwargs: The environment's keyword arguments besides the goal
+    :param eval_every: Evaluate the new policy alone (no priors, sampled actions) every this many env
+        steps, logged as ``eval/success_rate`` and kept in ``evaluations.npz``; 0 never
+    :param eval_episodes: Episodes per evaluation
+    :param vec_env: "dummy" (envs stepped in this process) or "subproc" (one process per env: their
+        rendering runs in parallel on several cores)
+    :param overlap: ACER's replay updates in a second thread while the next segment is collected (faster
+        on two cores; see ``ACER``'s ``overlap``). ``dopt train`` turns it on; off here, so that the
+        experiments keep the sequential loop their figures were made with unless a cell asks for it
+    :param frame_stack: The new policy sees its last this many observations (its memory; 1: the current one);
+        the priors keep their single observation
+    :param jsrl_horizon: Mode "jsrl": the guide's horizon at the start, in steps; 0 for the priors' mean
+        episode length on their zoo cards
+    :param init: "scratch" (a fresh network) or "prior" (the most similar prior's architecture and weights, as
+        "finetune" does, for any mode: e.g. disagreement options with a new policy that starts as the prior)
+    :param record_trajectories: Write env 0's episodes (positions and per-step tags) to ``trajectories.jsonl``, for
+        the trajectory pictures (``dopt eval --trajectory``, Figure 5)
+    :param checkpoint_every: Write a checkpoint (model, replay buffer, log positions) every this many env steps;
+        0 only at the end
+    """
+
+    goal: str
+    env_id: str = DEFAULT_ENV
+    mode: str = "disagreement"
+    priors: Any = "auto"
+    alpha: int = 10
+    beta: float = 0.1
+    entropy_offset: float = 0.1
+    steps: int = 100_000
+    seed: int = 0
+    n_envs: int = 4
+    embedding: Optional[str] = None
+    zoo: Optional[str] = None
+    acer_kwargs: dict[str, Any] = field(default_factory=lambda: dict(ACER_KWARGS))
+    env_kwargs: dict[str, Any] = field(default_factory=dict)
+    eval_every: int = 0
+    eval_episodes: int = 20
+    vec_env: str = "dummy"
+    overlap: bool = False
+    frame_stack: int = 1
+    jsrl_horizon: int = 0
+    checkpoint_every: int = 25_000
+    init: str = "scratch"
+    record_trajectories: bool = False
+
+    def validate(self) -> None:
+        self._check_types()
+        safe_name(self.goal, "--goal")
+        check_navigation_env(self.env_id)
+        safe_name(self.env_id.replace("/", "__"), "--env")
+        if self.mode not in MODES:
+            raise ValueError(f"--mode must be one of {', '.join(MODES)}, got {self.mode!r}")
+        if not self.beta >= 0:
+            raise ValueError(f"--beta must be >= 0 (the priors are followed while disagreement is below it), got {self.beta}")
+        if self.alpha < 1:
+            raise ValueError(f"--alpha must be >= 1, got {self.alpha}")
+        if self.steps < 1 or self.n_envs < 1:
+            raise ValueError("--steps and --n-envs must be positive")
+        if self.vec_env not in ("dummy", "subproc"):
+            raise ValueError(f"--vec-env must be dummy or subproc, got {self.vec_env!r}")
+        if self.init not in ("scratch", "prior"):
+            raise ValueError(f"--init must be scratch or prior, got {self.init!r}")
+        if self.init == "prior" and self.mode in ("scratch", "ppo"):
+            raise ValueError(f"--init prior starts from a prior's weights: mode {self.mode} has no priors")
+        if self.checkpoint_every < 0:
+            raise ValueError(f"--checkpoint-every must be >= 0, got {self.checkpoint_every}")
+        if self.jsrl_horizon < 0:
+            raise ValueError(f"--jsrl-horizon must be >= 0, got {self.jsrl_horizon}")
+        if self.frame_stack < 1:
+            raise ValueError(f"--frame-stack must be >= 1, got {self.frame_stack}")
+        if self.frame_stack > 1 and self.mode == "ppo":
+            raise ValueError("--frame-stack is an ACER policy's memory; --mode ppo trains SB3's PPO without it")
+        if self.eval_every < 0 or self.eval_episodes < 1:
+            raise ValueError("--eval-every must be >= 0 and --eval-episodes positive")
+
+    def _check_types(self) -> None:
+        """Every field of the type it is declared with (a YAML grid or a saved config can hold anything)."""
+        kinds = {int: ((int,), "an integer"), float: ((int, float), "a number"), str: ((str,), "a word"),
+                 bool: ((bool,), "true or false")}
+        for name, spec in self.__dataclass_fields__.items():
+            value = getattr(self, name)
+            if str(spec.type).startswith("dict") and not isinstance(value, dict):
+                raise ValueError(f"{name} must be a mapping, got {value!r}")
+            if spec.type not in kinds or (name in ("embedding", "zoo") and value is None):
+                continue
+            allowed, what = kinds[spec.type]
+            if (isinstance(value, bool) and bool not in allowed) or not isinstance(value, allowed):
+                raise ValueError(f"{name} must be {what}, got {value!r}")
+        if not (self.priors == "auto" or (isinstance(self.priors, (list, tuple))
+                                          and all(isinstance(p, str) for p in self.priors))):
+            raise ValueError(f"priors must be 'auto' or a list of goal words, got {self.priors!r}")
+
+    def run_dir(self, out: Path) -> Path:
+        return out / self.env_id.replace("/", "__") / self.goal / f"{self.mode}-{self.seed}"
+
+
+def check_navigation_env(env_id: str) -> None:
+    """A ValueError unless ``env_id`` is a registered goal-navigation env (one that takes ``goal=``)."""
+    import gymnasium as gym
+
+    from sb3_disagree.envs.navigation import NavigationEnv
+
+    if env_id not in gym.registry:
+        ours = ", ".join(k for k in gym.registry if k.startswith("sb3_disagree/"))
+        raise ValueError(f"unknown environment {env_id!r}; this package registers {ours}")
+    entry = gym.spec(env_id).entry_point
+    cls = gym.envs.registration.load_env_creator(entry) if isinstance(entry, str) else entry
+    if not (isinstance(cls, type) and issubclass(cls, NavigationEnv)):
+        raise ValueError(f"{env_id} is not a goal-navigation environment of this package (it takes no goal); "
+                         "use one of the sb3_disagree/ environments")
+
+

@@ -1,0 +1,108 @@
+"""The new policy alone: along a run (greedy and sampled), after it, and on its model card."""
+
+from pathlib import Path
+from typing import Any, Optional
+
+import numpy as np
+import yaml
+from stable_baselines3.common.callbacks import BaseCallback
+
+from sb3_disagree.defaults import EVAL_SEED_OFFSET, FINAL_EVAL_SEED_OFFSET
+from sb3_disagree.run.config import RunConfig
+from sb3_disagree.run.envs import build_env
+
+class EvaluateAlone(BaseCallback):
+    """
+    Every ``every`` env steps, the new policy alone (no priors) on envs of its own seeds, greedy and sampled,
+    with SB3's ``evaluate_policy``: logged as ``eval/success_rate_greedy`` and ``eval/success_rate`` (sampled)
+    and kept in ``evaluations.npz`` (``timesteps``; per evaluation and episode ``successes`` sampled,
+    ``successes_greedy``, and the sampled episodes' ``results`` and ``ep_lengths``, as SB3's ``EvalCallback``). With ``append`` the evaluations already in the file stay ahead of the new ones.
+
+    :param config: The run's configuration: env, goal, seed, episodes per evaluation
+    :param run_dir: Where ``evaluations.npz`` goes
+    :param append: Keep the evaluations of the run this one resumes
+    :param upto: With ``append``, keep only those made at or before this many env steps
+    """
+
+    KEYS = ("timesteps", "successes", "successes_greedy", "results", "ep_lengths")
+
+    def __init__(self, config: RunConfig, run_dir: Path, append: bool = False, upto: Optional[int] = None) -> None:
+        super().__init__()
+        self.config, self.path = config, run_dir / "evaluations.npz"
+        self.every = max(config.eval_every // config.n_envs, 1)  # in calls, one per vectorised step
+        self.history: dict[str, list] = {key: [] for key in self.KEYS}
+        if append and self.path.exists():
+            with np.load(self.path) as data:
+                keep = [upto is None or t <= upto for t in data["timesteps"]]  # none after the checkpoint resumed
+                self.history = {key: [v for v, k in zip(data[key], keep) if k] for key in self.KEYS if key in data}
+                self.history.setdefault("successes_greedy", [])
+        self.env = None
+
+    def _on_step(self) -> bool:
+        if self.n_calls % self.every:
+            return True
+        from sb3_disagree.prior_training import evaluate
+
+        if self.env is None:
+            self.env = build_env(self.config, None, n_envs=min(self.config.n_envs, 4),
+                                 seed=self.config.seed + EVAL_SEED_OFFSET, vec_env="dummy")
+        sampled = evaluate(self.model, self.env, self.config.eval_episodes, deterministic=False)
+        greedy = evaluate(self.model, self.env, self.config.eval_episodes, deterministic=True)
+        per = sampled.per_episode
+        for key, value in zip(self.KEYS, (self.num_timesteps, per["successes"], greedy.per_episode["successes"],
+                                          per["returns"], per["lengths"])):
+            self.history[key].append(value)
+        np.savez(self.path, **{key: np.asarray(values) for key, values in self.history.items()})
+        self.logger.record("eval/success_rate", sampled.success_rate)
+        self.logger.record("eval/success_rate_greedy", greedy.success_rate)
+        self.logger.record("eval/mean_ep_length", sampled.mean_length)
+        self.logger.record("time/total_timesteps", self.num_timesteps, exclude="tensorboard")
+        self.logger.dump(self.num_timesteps)  # as SB3's EvalCallback: the evaluation gets its own row
+        return True
+
+    def _on_training_end(self) -> None:
+        if self.env is not None:
+            self.env.close()
+
+
+def write_card(run_dir: Path, model, episodes: int, command: str = "") -> dict[str, Any]:
+    """
+    Evaluate a run's policy alone greedy and sampled (``episodes`` each, env seeds the run never trained on;
+    none when 0) and write its model card (``README.md``) beside ``model.zip``.
+
+    :return: The evaluations by label ("greedy", "sampled")
+    """
+    from sb3_disagree.model_card import write_model_card
+
+    config = yaml.safe_load((Path(run_dir) / "config.yaml").read_text())
+    seed = config["seed"] + FINAL_EVAL_SEED_OFFSET
+    evaluations = {label: evaluate_alone(model, config, episodes, label == "greedy", seed)
+                   for label in ("greedy", "sampled")} if episodes > 0 else {}
+    write_model_card(run_dir, config, type(model).__name__, evaluations, command)
+    return evaluations
+
+
+def evaluate_alone(model: Any, config: dict[str, Any], episodes: int, deterministic: bool, seed: int):
+    """
+    The new policy alone (no priors) in its run's task, on 4 envs seeded from ``seed``.
+
+    :param model: The trained model
+    :param config: The run's configuration (a saved ``config.yaml`` or ``asdict(RunConfig)``): env and goal
+    :param episodes: Number of episodes
+    :param deterministic: Greedy actions if True, sampled otherwise
+    :param seed: Seed of the first env
+    :return: The :class:`~sb3_disagree.prior_training.Evaluation`
+    """
+    from sb3_disagree.prior_training import evaluate, make_env
+    from sb3_disagree.zoo import space_fits, space_to_dict
+
+    env = make_env(config["env_id"], config["goal"], config.get("env_kwargs") or {}, n_envs=4, seed=seed)
+    try:
+        for kind in ("observation", "action"):
+            theirs = getattr(model, f"{kind}_space")
+            if not space_fits(space_to_dict(theirs), getattr(env, f"{kind}_space")):
+                raise ValueError(f"the model acts on {kind}s {space_to_dict(theirs)}, but {config['env_id']} gives "
+                                 f"{space_to_dict(getattr(env, f'{kind}_space'))}: it was trained elsewhere")
+        return evaluate(model, env, episodes, deterministic=deterministic)
+    finally:
+        env.close()

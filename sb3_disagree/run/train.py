@@ -1,0 +1,145 @@
+"""
+One training run: choose priors, build the behaviour, train, write the run folder.
+
+A run folder (``runs/<env>/<goal>/<mode>-<seed>/``) holds ``config.yaml``, ``model.zip``,
+``progress.csv``, TensorBoard events, ``monitor/`` files, ``checkpoints/``, the model card ``README.md`` and,
+when asked (``record_trajectories``), ``trajectories.jsonl`` (the recorded episodes with their per-step
+tags). A run survives what stops it (``sb3_disagree.checkpoints``); a resumed run continues the step count
+and its history (monitor files, ``progress.csv``, ``evaluations.npz``), so its curves read as one run.
+"""
+
+import os
+import pickle
+import shutil
+import zipfile
+from collections.abc import Callable
+from dataclasses import asdict
+from pathlib import Path
+from typing import Optional
+
+import yaml
+from stable_baselines3.common.callbacks import BaseCallback, CallbackList
+
+from sb3_disagree.acer import ACER
+from sb3_disagree.checkpoints import Checkpoint, latest_checkpoint, save_checkpoint, sigterm_as_interrupt, truncate_logs
+from sb3_disagree.files import write_atomic
+from sb3_disagree.options import make_options
+from sb3_disagree.run.config import RunConfig
+from sb3_disagree.run.envs import build_env
+from sb3_disagree.run.evaluation import EvaluateAlone
+from sb3_disagree.run.logs import run_logger
+from sb3_disagree.run.models import algorithm_of, new_model
+from sb3_disagree.run.priors import choose_priors, guide_horizon
+from sb3_disagree.run.trajectories import RecordTrajectories
+
+def train(config: RunConfig, out: Path = Path("runs"), resume: Optional[Path] = None,
+          callbacks: Optional[list[BaseCallback]] = None, on_priors: Optional[Callable[[list, list], None]] = None,
+          run_dir: Optional[Path] = None, steps: Optional[int] = None, force: bool = False) -> tuple[Path, ACER, bool]:
+    """
+    Train a new policy with the method (or from scratch, or a peer method), writing the run folder.
+
+    A run survives what stops it (``sb3_disagree.checkpoints``): a checkpoint every ``config.checkpoint_every``
+    env steps and at the end, SIGTERM saved like Ctrl-C; ``resume`` continues from the newest complete
+    checkpoint, with the logs cut back to it.
+
+    :param config: The run's configuration (ignored in favour of the saved one when resuming)
+    :param out: Root of the runs
+    :param resume: A run folder to continue
+    :param callbacks: Extra SB3 callbacks (the CLI's live display)
+    :param on_priors: Called with the chosen priors and their similarities
+    :param run_dir: Write the run here instead of under ``out`` (experiments choose their own layout)
+    :param steps: With ``resume``, the run's new total of env steps (default: the saved one)
+    :param force: Replace an existing run in the folder (without it, an existing run is an error)
+    :return: The run folder, the model, and whether training finished (False when interrupted)
+    """
+    checkpoint = None
+    if resume is not None:
+        run_dir = Path(resume)
+        if not (run_dir / "config.yaml").exists() or not (run_dir / "model.zip").exists():
+            raise FileNotFoundError(f"{run_dir} is not a run folder with config.yaml and model.zip to resume")
+        saved = yaml.safe_load((run_dir / "config.yaml").read_text())
+        config = RunConfig(**{k: v for k, v in saved.items() if k in RunConfig.__dataclass_fields__})
+        checkpoint = latest_checkpoint(run_dir)
+        done = checkpoint[1]["num_timesteps"] if checkpoint else int(saved.get("num_timesteps") or 0)
+        if steps is not None:  # a finished run continues to a larger budget
+            if steps < done:
+                raise ValueError(f"--steps {steps} is below the {done:,} steps {run_dir} has already trained")
+            config.steps = steps
+        if checkpoint is not None:  # the history continues from the checkpoint: what came after it is cut
+            truncate_logs(run_dir, checkpoint[1]["logs"])
+    config.validate()
+    run_dir = Path(resume or run_dir or config.run_dir(Path(out)))
+    if resume is None and run_dir.exists() and any(run_dir.iterdir()):
+        if not force:
+            raise ValueError(f"{run_dir} already holds a run: continue it with --resume {run_dir}, or replace it "
+                             "with --force")
+        shutil.rmtree(run_dir)
+    created = run_dir  # the outermost folder this run creates, removed again if the start fails
+    while not created.parent.exists():
+        created = created.parent
+    created = created if not run_dir.exists() else None
+    run_dir.mkdir(parents=True, exist_ok=True)
+    try:
+        env = build_env(config, run_dir, append=resume is not None)
+        behaviour, prior_names, sims, priors = None, [], [], None
+        if config.mode not in ("scratch", "ppo"):
+            prior_names, sims, priors = choose_priors(config, env)
+            if on_priors:
+                on_priors(prior_names, sims)
+            horizon = config.jsrl_horizon or guide_horizon(config, prior_names) if config.mode == "jsrl" else 0
+            behaviour = make_options(config.mode, priors, config.alpha, config.beta, config.entropy_offset,
+                                     seed=config.seed, horizon=horizon)
+        saved_config = dict(asdict(config), chosen_priors=prior_names, similarities=sims)
+        if resume is not None:
+            model = _resumed_model(config, run_dir, env, behaviour, checkpoint)
+            remaining = max(config.steps - model.num_timesteps, 0)
+        else:
+            model = new_model(config, env, behaviour, priors)
+            remaining = config.steps
+            (run_dir / "config.yaml").write_text(yaml.safe_dump(saved_config, sort_keys=False))
+    except BaseException:
+        if created is not None:  # a failed start leaves nothing behind
+            shutil.rmtree(created, ignore_errors=True)
+        raise
+    model.set_logger(run_logger(run_dir, append=resume is not None))
+    own: list[BaseCallback] = []
+    if config.record_trajectories:
+        own.append(RecordTrajectories(run_dir / "trajectories.jsonl"))
+    if config.eval_every:
+        own.append(EvaluateAlone(config, run_dir, append=resume is not None, upto=model.num_timesteps))
+    if config.checkpoint_every:
+        own.append(Checkpoint(run_dir, config.checkpoint_every))
+    finished = True
+    try:
+        with sigterm_as_interrupt():
+            model.learn(remaining, callback=CallbackList([*own, *(callbacks or [])]), log_interval=10,
+                        reset_num_timesteps=resume is None)
+    except KeyboardInterrupt:
+        finished = False
+    # A finished run keeps no replay buffer (a continuation starts with an empty one); an interrupted one does.
+    with sigterm_as_interrupt():
+        save_checkpoint(model, run_dir, with_buffer=not finished)
+        saved_config.update(num_timesteps=int(model.num_timesteps), finished=finished)
+        write_atomic(run_dir / "config.yaml", yaml.safe_dump(saved_config, sort_keys=False))
+    if (run_dir / "replay_buffer.pkl").exists():  # left by a version that kept it beside the model
+        os.remove(run_dir / "replay_buffer.pkl")
+    env.close()
+    return run_dir, model, finished
+
+
+def _resumed_model(config: RunConfig, run_dir: Path, env, behaviour, checkpoint):
+    """The model a resumed run continues: from its newest complete checkpoint (with the replay buffer it kept),
+    else from ``model.zip`` (and a ``replay_buffer.pkl`` beside it, as earlier versions left them)."""
+    folder = checkpoint[0] if checkpoint else run_dir
+    try:
+        if config.mode == "ppo":
+            model = algorithm_of(config.mode).load(folder / "model.zip", env=env)
+        else:
+            model = ACER.load(folder / "model.zip", env=env, behaviour=behaviour, overlap=config.overlap)
+        if (folder / "replay_buffer.pkl").exists() and isinstance(model, ACER):
+            model.load_replay_buffer(folder / "replay_buffer.pkl")
+    except (EOFError, OSError, zipfile.BadZipFile, pickle.UnpicklingError) as exc:
+        raise ValueError(f"{run_dir} cannot be resumed: its saved model or replay buffer is damaged ({exc})") from None
+    return model
+
+
