@@ -195,7 +195,9 @@ def plot(experiment: Experiment, grid: np.ndarray, summaries: list[CellSummary],
 
     n_paths = len(summaries) if experiment.trajectories else 0
     # Curves on the first row; with trajectories, one map per cell on a second row.
-    fig = plt.figure(figsize=(11, 4.2 if not n_paths else 4.2 + 3.6))
+    legend_rows = -(-len(summaries) // 4)  # the legend sits under the figure, four cells a row
+    legend_height = 0.35 + 0.22 * legend_rows
+    fig = plt.figure(figsize=(11, 4.2 + legend_height + (3.6 if n_paths else 0)))
     grid_spec = fig.add_gridspec(2 if n_paths else 1, max(n_paths, 2) * 2 if n_paths else 2)
     half = grid_spec.ncols // 2
     ax1, ax2 = fig.add_subplot(grid_spec[0, :half]), fig.add_subplot(grid_spec[0, half:])
@@ -225,12 +227,14 @@ def plot(experiment: Experiment, grid: np.ndarray, summaries: list[CellSummary],
         legend_title = "solid: training; the new policy alone: dashed sampled, dotted greedy"
     elif any(len(s.alone_steps) for s in summaries):
         legend_title = "solid: training; dashed: the new policy alone (sampled)"
-    ax1.legend(loc="center right", fontsize=8, title=legend_title, title_fontsize=7, framealpha=0.6)
+    handles, labels = ax1.get_legend_handles_labels()
+    fig.legend(handles, labels, loc="lower center", ncol=min(len(labels), 4), fontsize=8, title=legend_title,
+               title_fontsize=8, frameon=False)
     if ax2.lines:
         ax2.legend(loc="upper right", fontsize=8)
     for ax, s in zip(path_axes, summaries):
         _draw_path(ax, experiment, root / s.cell / f"seed-{s.seeds[0]}", s.cell)
-    fig.tight_layout()
+    fig.tight_layout(rect=(0, legend_height / fig.get_figheight(), 1, 1))
     out.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(out, dpi=100)
     plt.close(fig)
