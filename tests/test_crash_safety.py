@@ -261,3 +261,26 @@ def test_after_load_the_behaviours_first_infos_describe_the_reset_observations(t
     model = ACER.load(tmp_path / "m.zip", env=env, behaviour=behaviour)
     model.learn(10, reset_num_timesteps=False)
     assert all("room" in info for info in behaviour.first), behaviour.first
+
+
+def test_a_stale_temporary_folder_in_the_zoo_trips_nothing(tmp_path):
+    from sb3_disagree.zoo import Zoo
+
+    zoo = tmp_path / "zoo"
+    ACER("MlpPolicy", make_vec_env(STATE_ID, n_envs=1, env_kwargs=dict(goal="bed"))).save(tmp_path / "m.zip")
+    Zoo(zoo).add(tmp_path / "m.zip", "bed", STATE_ID)
+    (zoo / "sb3_disagree__ApartmentState-v0" / ".bed-x1y2").mkdir()  # an add killed between its writes
+    (zoo / ".sb3_disagree__Nowhere-v0-tmp").mkdir()
+    (zoo / "sb3_disagree__ApartmentState-v0" / ".bed-x1y2" / "model.zip").write_bytes(b"half")
+    result = runner.invoke(app, ["priors", "list", "--zoo", str(zoo)])
+    assert result.exit_code == 0 and [e.goal for e in Zoo(zoo).entries()] == ["bed"]
+
+
+def test_resuming_a_run_whose_every_save_is_damaged_is_one_line_and_exit_2(tmp_path):
+    assert runner.invoke(app, _args(tmp_path, "--steps", "200")).exit_code == 0
+    run = tmp_path / "sb3_disagree__ApartmentState-v0" / "bathtub" / "disagreement-0"
+    for model in [run / "model.zip", *run.glob("checkpoints/*/model.zip")]:
+        with open(model, "r+b") as f:
+            f.truncate(64)
+    result = runner.invoke(app, ["train", "--goal", "bathtub", "--resume", str(run), "--steps", "400"])
+    assert result.exit_code == 2 and "damaged" in result.output and "Traceback" not in result.output

@@ -121,3 +121,12 @@ def test_bad_embedding_inputs(tmp_path):
 
 def test_normalise_goal():
     assert normalise_goal("  Coffee_Table ") == "coffee table"
+
+
+def test_a_zero_vector_is_refused_rather_than_ranked_at_nan():
+    from sb3_disagree.language import KeyedVectorsEmbedding, rank_by_similarity
+
+    kv = KeyedVectors(vector_size=3)
+    kv.add_vectors(["bathtub", "shower", "toilet"], np.array([[1, 0, 0], [0, 0, 0], [0, 1, 0]], dtype=np.float32))
+    with pytest.raises(ValueError, match="'shower' a zero or non-finite vector"):
+        rank_by_similarity("bathtub", ["shower", "toilet"], KeyedVectorsEmbedding(kv))

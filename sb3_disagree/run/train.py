@@ -138,7 +138,7 @@ def _resumed_model(config: RunConfig, run_dir: Path, env, behaviour, checkpoint)
             model = ACER.load(folder / "model.zip", env=env, behaviour=behaviour, overlap=config.overlap)
         if (folder / "replay_buffer.pkl").exists() and isinstance(model, ACER):
             model.load_replay_buffer(folder / "replay_buffer.pkl")
-    except (EOFError, OSError, zipfile.BadZipFile, pickle.UnpicklingError) as exc:
+    except (EOFError, OSError, ValueError, zipfile.BadZipFile, pickle.UnpicklingError) as exc:
         raise ValueError(f"{run_dir} cannot be resumed: its saved model or replay buffer is damaged ({exc})") from None
     return model
 
