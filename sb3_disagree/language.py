@@ -104,8 +104,7 @@ class KeyedVectorsEmbedding(Embedding):
         for joined in ("_".join(words), "-".join(words), "".join(words)):
             token = self._token(joined)
             if token is not None:
-                v = np.asarray(self.kv[token], dtype=np.float64)
-                return v / np.linalg.norm(v)
+                return _unit(np.asarray(self.kv[token], dtype=np.float64), phrase)
         if len(words) == 1 and not _has_subwords(self.kv):
             raise UnknownWordError(words[0], self._suggest(words[0]), self.name)
         parts = []
@@ -113,10 +112,8 @@ class KeyedVectorsEmbedding(Embedding):
             token = self._token(w)
             if token is None and not _has_subwords(self.kv):
                 raise UnknownWordError(w, self._suggest(w), self.name)
-            v = np.asarray(self.kv[token if token is not None else w], dtype=np.float64)
-            parts.append(v / np.linalg.norm(v))
-        mean = np.mean(parts, axis=0)
-        return mean / np.linalg.norm(mean)
+            parts.append(_unit(np.asarray(self.kv[token if token is not None else w], dtype=np.float64), w))
+        return _unit(np.mean(parts, axis=0), phrase)
 
     def vectors(self, goals: Sequence[str]) -> np.ndarray:
         return np.stack([self._vector(g) for g in goals])
@@ -269,6 +266,15 @@ def load_embedding(path: Optional[Union[str, Path]] = None, format: str = "auto"
     except Exception as exc:
         raise ValueError(f"could not read {path} as {fmt} vectors: {exc}") from exc
     return KeyedVectorsEmbedding(kv, name=f"the embedding {path.name}")
+
+
+def _unit(v: np.ndarray, word: str) -> np.ndarray:
+    """``v`` scaled to length 1; a ValueError where it has no direction (zero or non-finite)."""
+    norm = np.linalg.norm(v)
+    if not np.isfinite(norm) or norm == 0:
+        raise ValueError(f"the embedding gives {word!r} a zero or non-finite vector: no similarity can rank the "
+                         "priors by it")
+    return v / norm
 
 
 def rank_by_similarity(goal: str, labels: Iterable[str], embedding: Embedding) -> list[tuple[str, float]]:
