@@ -234,12 +234,17 @@ def _evaluate(z, entry, episodes: int, deterministic: bool, seed: int):
 
 
 def _evaluate_into_card(z, entry, episodes: int) -> None:
-    """Evaluate a new entry with greedy and sampled actions and record both on its card."""
-    for greedy in (True, False):
-        result = _evaluate(z, entry, episodes, deterministic=greedy, seed=CARD_SEED)
-        entry = z.record_evaluation(entry, {**result.as_dict(), "seed": CARD_SEED})
-        console.print(f"{entry.goal}: success {result.success_rate:.2f} over {episodes} episodes "
-                      f"({'greedy' if greedy else 'sampled'}), mean length {result.mean_length:.1f}")
+    """Evaluate a new entry with greedy and sampled actions and record both on its card (with a progress display)."""
+    from sb3_disagree.prior_training import record_evaluations
+
+    with _progress() as progress:
+        tasks = {label: progress.add_task(f"evaluating {entry.goal} ({label})", total=episodes)
+                 for label in ("greedy", "sampled")}
+        entry, evaluations = record_evaluations(z, entry, episodes,
+                                                lambda label, n: progress.update(tasks[label], completed=n))
+    for label, result in evaluations.items():
+        console.print(f"{entry.goal}: success {result.success_rate:.2f} over {episodes} episodes ({label}), "
+                      f"mean length {result.mean_length:.1f}")
 
 
 def similarity(

@@ -174,7 +174,7 @@ def eval_run(
     with clean_errors():
         import yaml
 
-        from sb3_disagree.run import FINAL_EVAL_SEED_OFFSET, algorithm_of, evaluate_alone
+        from sb3_disagree.run import algorithm_of, evaluate_both
 
         path = Path(run_or_model)
         run_dir = path if path.is_dir() else path.parent
@@ -190,12 +190,11 @@ def eval_run(
             model = algorithm.load(model_path, device="cpu")
         except Exception as exc:  # a damaged file, or another algorithm's
             raise ValueError(f"{model_path} could not be loaded as {algorithm.__name__}: {exc}") from None
-        for greedy in (True, False) if deterministic is None else (deterministic,):
-            first = cfg.get("seed", 0) + FINAL_EVAL_SEED_OFFSET if seed is None else seed
-            result = evaluate_alone(model, cfg, episodes, greedy, first)
+        labels = ("greedy", "sampled") if deterministic is None else ("greedy" if deterministic else "sampled",)
+        for label, result in evaluate_both(model, cfg, episodes, seed, labels).items():
             console.print(f"{cfg['goal']}: success {result.success_rate:.2f}, mean length {result.mean_length:.1f}, "
                           f"mean return {result.mean_return:.2f} over {episodes} episodes "
-                          f"({'greedy' if greedy else 'sampled'} actions, no priors)")
+                          f"({label} actions, no priors)")
         if trajectory is not None:
             draw_recorded(run_dir, cfg, trajectory, episode)
 

@@ -282,7 +282,7 @@ def make_prior(zoo: Any, goal: str, env_id: str, method: str = "dagger", steps: 
     import tempfile
     from pathlib import Path
 
-    from sb3_disagree.defaults import PRIOR_CARD_SEED, PRIOR_VALIDATION_SEED
+    from sb3_disagree.defaults import PRIOR_VALIDATION_SEED
 
     if method not in METHODS:
         raise ValueError(f"--method must be one of {', '.join(METHODS)}, got {method!r}")
@@ -301,8 +301,22 @@ def make_prior(zoo: Any, goal: str, env_id: str, method: str = "dagger", steps: 
     with tempfile.TemporaryDirectory() as tmp:
         model.save(Path(tmp) / "model.zip")
         entry = zoo.add(Path(tmp) / "model.zip", goal, env_id, training=record, command=command, replace=replace)
+    return record_evaluations(zoo, entry, episodes) if episodes else (entry, {})
+
+
+def record_evaluations(zoo: Any, entry: Any, episodes: int,
+                       progress: Optional[Callable[[str, int], None]] = None) -> tuple[Any, dict[str, Evaluation]]:
+    """
+    Evaluate a zoo entry alone greedy and sampled (env seeds from ``PRIOR_CARD_SEED``) and record both on its card.
+
+    :param progress: Called with the label and the number of finished episodes
+    :return: The entry as read back, and the evaluations by label ("greedy", "sampled")
+    """
+    from sb3_disagree.defaults import PRIOR_CARD_SEED
+
     evaluations = {}
-    for label in ("greedy", "sampled") if episodes else ():
-        evaluations[label] = evaluate_entry(zoo, entry, episodes, label == "greedy", PRIOR_CARD_SEED)
+    for label in ("greedy", "sampled"):
+        evaluations[label] = evaluate_entry(zoo, entry, episodes, label == "greedy", PRIOR_CARD_SEED,
+                                            (lambda n, label=label: progress(label, n)) if progress else None)
         entry = zoo.record_evaluation(entry, {**evaluations[label].as_dict(), "seed": PRIOR_CARD_SEED})
     return entry, evaluations

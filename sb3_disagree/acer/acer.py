@@ -194,10 +194,12 @@ class ACER(BaseAlgorithm):
         )
         self._last_infos: list[dict[str, Any]] = [{} for _ in range(self.n_envs)]
         self._last_stack: Optional[np.ndarray] = None  # the policy's input: the last frame_stack observations
+        self._ent_coef_schedule = as_schedule(self.ent_coef)
         self.last_rollout_tags: Optional[np.ndarray] = None
 
     def _excluded_save_params(self) -> list[str]:
-        return [*super()._excluded_save_params(), "behaviour", "_last_infos", "_last_stack", "last_rollout_tags"]
+        return [*super()._excluded_save_params(), "behaviour", "_last_infos", "_last_stack", "_ent_coef_schedule",
+                "last_rollout_tags"]
 
     def _get_torch_save_params(self) -> tuple[list[str], list[str]]:
         return ["policy", "policy.optimizer"], []
@@ -366,7 +368,7 @@ class ACER(BaseAlgorithm):
         # The policy objective as a function of the probability vector f, where the trust region acts.
         f = probs.detach().requires_grad_(True)
         terms = policy_terms(f, actions, q_values.detach(), values, q_ret, rho, self.c)
-        ent_coef = float(as_schedule(self.ent_coef)(self._current_progress_remaining))
+        ent_coef = float(self._ent_coef_schedule(self._current_progress_remaining))
         objective = (terms.truncated_is + terms.bias_correction + ent_coef * terms.entropy).mean()
         (g,) = th.autograd.grad(objective * n, f)
         tr_scale = th.zeros(n, device=self.device)

@@ -62,7 +62,7 @@ def train_and_evaluate(run: Run, folder: Path, source: Optional[Path] = None,
     # One torch thread per run, as several share a machine; an overlapped run works in two threads, and its
     # on-policy update (while the other thread is idle) may use both.
     th.set_num_threads(2 if run.config.overlap else 1)
-    from sb3_disagree.run import FINAL_EVAL_SEED_OFFSET, evaluate_alone, train
+    from sb3_disagree.run import train, write_card
 
     begun = _start_from(source, folder) if source is not None else 0
     start = time.perf_counter()
@@ -79,18 +79,12 @@ def train_and_evaluate(run: Run, folder: Path, source: Optional[Path] = None,
     if not finished:
         raise KeyboardInterrupt
     seconds = time.perf_counter() - start
-    # The new policy alone from env seeds the run never trained on, sampled and greedy (SB3's default).
-    config, seed = asdict(run.config), run.seed + FINAL_EVAL_SEED_OFFSET
-    alone = evaluate_alone(model, config, run.final_episodes, deterministic=False, seed=seed)
-    greedy = evaluate_alone(model, config, run.final_episodes, deterministic=True, seed=seed)
+    # The new policy alone from env seeds the run never trained on, greedy (SB3's default) and sampled, on its card.
+    evaluations = write_card(folder, model, run.final_episodes, f"dopt experiment run {run.cell} (seed {run.seed})")
     result = {"cell": run.cell, "seed": run.seed, "steps": int(model.num_timesteps), "seconds": round(seconds, 1),
-              "fps": round((model.num_timesteps - begun) / max(seconds, 1e-9), 1), "final_alone": alone.as_dict(),
-              "final_alone_greedy": greedy.as_dict(),
+              "fps": round((model.num_timesteps - begun) / max(seconds, 1e-9), 1),
+              "final_alone": evaluations["sampled"].as_dict(), "final_alone_greedy": evaluations["greedy"].as_dict(),
               "config": asdict(run.config), **({"continued_from": str(source), "from_steps": begun} if source else {})}
-    from sb3_disagree.model_card import write_model_card
-
-    write_model_card(folder, {**yaml.safe_load((folder / "config.yaml").read_text())}, type(model).__name__,
-                     {"greedy": greedy, "sampled": alone}, f"dopt experiment run {run.cell} (seed {run.seed})")
     write_atomic(folder / RESULT, json.dumps(result, indent=2) + "\n")
     return result
 

@@ -8,7 +8,7 @@ modes' defaults), ``priors`` (choosing them), ``models`` (what trains), ``envs``
 from sb3_disagree.defaults import DEFAULT_ENV, EVAL_SEED_OFFSET, FINAL_EVAL_SEED_OFFSET
 from sb3_disagree.run.config import ACER_KWARGS, KICKSTART, PPO_KWARGS, RunConfig, check_navigation_env
 from sb3_disagree.run.envs import build_env
-from sb3_disagree.run.evaluation import EvaluateAlone, evaluate_alone, write_card
+from sb3_disagree.run.evaluation import EvaluateAlone, evaluate_alone, evaluate_both, write_card
 from sb3_disagree.run.logs import AppendingCSVOutputFormat, run_logger
 from sb3_disagree.run.models import algorithm_of, new_model
 from sb3_disagree.run.priors import choose_priors, guide_horizon
@@ -17,5 +17,5 @@ from sb3_disagree.run.trajectories import RecordTrajectories
 
 __all__ = ["ACER_KWARGS", "DEFAULT_ENV", "EVAL_SEED_OFFSET", "FINAL_EVAL_SEED_OFFSET", "KICKSTART", "PPO_KWARGS",
            "AppendingCSVOutputFormat", "EvaluateAlone", "RecordTrajectories", "RunConfig", "algorithm_of", "build_env",
-           "check_navigation_env", "choose_priors", "evaluate_alone", "guide_horizon", "new_model", "run_logger",
+           "check_navigation_env", "choose_priors", "evaluate_alone", "evaluate_both", "guide_horizon", "new_model", "run_logger",
            "train", "write_card"]

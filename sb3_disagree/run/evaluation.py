@@ -75,11 +75,25 @@ def write_card(run_dir: Path, model, episodes: int, command: str = "") -> dict[s
     from sb3_disagree.model_card import write_model_card
 
     config = yaml.safe_load((Path(run_dir) / "config.yaml").read_text())
-    seed = config["seed"] + FINAL_EVAL_SEED_OFFSET
-    evaluations = {label: evaluate_alone(model, config, episodes, label == "greedy", seed)
-                   for label in ("greedy", "sampled")} if episodes > 0 else {}
+    evaluations = evaluate_both(model, config, episodes) if episodes > 0 else {}
     write_model_card(run_dir, config, type(model).__name__, evaluations, command)
     return evaluations
+
+
+def evaluate_both(model: Any, config: dict[str, Any], episodes: int, seed: Optional[int] = None,
+                  labels: tuple[str, ...] = ("greedy", "sampled")) -> dict[str, Any]:
+    """
+    The new policy alone greedy (SB3's default) and sampled, side by side, from the same env seeds.
+
+    :param model: The trained model
+    :param config: The run's configuration: env, goal, seed
+    :param episodes: Episodes each way
+    :param seed: Env seed of the first env; default the run's seed + ``FINAL_EVAL_SEED_OFFSET`` (never trained on)
+    :param labels: Which of "greedy" and "sampled"
+    :return: The :class:`~sb3_disagree.prior_training.Evaluation` by label
+    """
+    first = config.get("seed", 0) + FINAL_EVAL_SEED_OFFSET if seed is None else seed
+    return {label: evaluate_alone(model, config, episodes, label == "greedy", first) for label in labels}
 
 
 def evaluate_alone(model: Any, config: dict[str, Any], episodes: int, deterministic: bool, seed: int):
