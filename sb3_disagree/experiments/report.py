@@ -232,6 +232,8 @@ def plot(experiment: Experiment, grid: np.ndarray, summaries: list[CellSummary],
                title_fontsize=8, frameon=False)
     if ax2.lines:
         ax2.legend(loc="upper right", fontsize=8)
+    else:
+        ax2.text(0.5, 0.5, "no cell here follows the priors", ha="center", va="center", transform=ax2.transAxes)
     for ax, s in zip(path_axes, summaries):
         _draw_path(ax, experiment, root / s.cell / f"seed-{s.seeds[0]}", s.cell)
     fig.tight_layout(rect=(0, legend_height / fig.get_figheight(), 1, 1))
