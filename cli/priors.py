@@ -11,8 +11,7 @@ from rich.table import Table
 
 from sb3_disagree.cli.common import DEFAULT_ENV, clean_errors, command_line, console
 from sb3_disagree.defaults import PRIOR_CARD_SEED as CARD_SEED
-from sb3_disagree.defaults import PRIOR_VALIDATION_SEED as VALIDATION_SEED
-from sb3_disagree.language import load_embedding, rank_by_similarity
+from sb3_disagree.priors.language import load_embedding, rank_by_similarity
 
 app = typer.Typer(help="The prior zoo: list, show, add, remove, evaluate and train priors.", no_args_is_help=True)
 
@@ -22,7 +21,7 @@ EMB_OPT = typer.Option(None, "--embedding", help="Word vectors (word2vec/GloVe/f
 
 
 def _zoo(path: Optional[Path]):
-    from sb3_disagree.zoo import Zoo
+    from sb3_disagree.priors.zoo import Zoo
 
     return Zoo(path)
 
@@ -207,9 +206,9 @@ def train(
     replace: bool = typer.Option(False, "--replace", help="Replace an existing prior for this goal."),
     zoo: Optional[Path] = ZOO_OPT,
 ) -> None:
-    """Train a prior for a goal and add it to the zoo with its card (sb3_disagree.prior_training.make_prior)."""
+    """Train a prior for a goal and add it to the zoo with its card (sb3_disagree.priors.make.make_prior)."""
     with clean_errors():
-        from sb3_disagree.prior_training import make_prior
+        from sb3_disagree.priors.make import make_prior
 
         dagger = dict(rounds=rounds, steps_per_round=steps_per_round, epochs=epochs, final_epochs=final_epochs,
                       validation_episodes=validation_episodes, learner_actions=learner_actions) if method == "dagger" else {}
@@ -226,7 +225,7 @@ def train(
 
 def _evaluate(z, entry, episodes: int, deterministic: bool, seed: int):
     """Run a zoo entry alone for some episodes on 4 envs seeded from ``seed``, with a progress display."""
-    from sb3_disagree.prior_training import evaluate_entry
+    from sb3_disagree.priors.make import evaluate_entry
 
     with _progress() as progress:
         task = progress.add_task(f"evaluating {entry.goal}", total=episodes)
@@ -235,7 +234,7 @@ def _evaluate(z, entry, episodes: int, deterministic: bool, seed: int):
 
 def _evaluate_into_card(z, entry, episodes: int) -> None:
     """Evaluate a new entry with greedy and sampled actions and record both on its card (with a progress display)."""
-    from sb3_disagree.prior_training import record_evaluations
+    from sb3_disagree.priors.make import record_evaluations
 
     with _progress() as progress:
         tasks = {label: progress.add_task(f"evaluating {entry.goal} ({label})", total=episodes)
@@ -254,7 +253,7 @@ def similarity(
 ) -> None:
     """Cosine similarities between goal words, as the paper's Figure 1."""
     with clean_errors():
-        from sb3_disagree.language import normalise_goal
+        from sb3_disagree.priors.language import normalise_goal
 
         emb = load_embedding(embedding)
         labels = [normalise_goal(w) for w in words]

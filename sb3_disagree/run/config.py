@@ -145,9 +145,9 @@ def check_navigation_env(env_id: str) -> None:
 
     from sb3_disagree.envs.navigation import NavigationEnv
 
-    if env_id not in gym.registry:
-        ours = ", ".join(k for k in gym.registry if k.startswith("sb3_disagree/"))
-        raise ValueError(f"unknown environment {env_id!r}; this package registers {ours}")
+    from sb3_disagree.envs.vec import check_env_id
+
+    check_env_id(env_id)
     entry = gym.spec(env_id).entry_point
     cls = gym.envs.registration.load_env_creator(entry) if isinstance(entry, str) else entry
     if not (isinstance(cls, type) and issubclass(cls, NavigationEnv)):

@@ -8,6 +8,9 @@ import yaml
 from stable_baselines3.common.callbacks import BaseCallback
 
 from sb3_disagree.defaults import EVAL_SEED_OFFSET, FINAL_EVAL_SEED_OFFSET
+from sb3_disagree.envs.vec import make_vec
+from sb3_disagree.evaluation import evaluate
+from sb3_disagree.priors.zoo import space_fits, space_to_dict
 from sb3_disagree.run.config import RunConfig
 from sb3_disagree.run.envs import build_env
 
@@ -41,7 +44,6 @@ class EvaluateAlone(BaseCallback):
     def _on_step(self) -> bool:
         if self.n_calls % self.every:
             return True
-        from sb3_disagree.prior_training import evaluate
 
         if self.env is None:
             self.env = build_env(self.config, None, n_envs=min(self.config.n_envs, 4),
@@ -90,7 +92,7 @@ def evaluate_both(model: Any, config: dict[str, Any], episodes: int, seed: Optio
     :param episodes: Episodes each way
     :param seed: Env seed of the first env; default the run's seed + ``FINAL_EVAL_SEED_OFFSET`` (never trained on)
     :param labels: Which of "greedy" and "sampled"
-    :return: The :class:`~sb3_disagree.prior_training.Evaluation` by label
+    :return: The :class:`~sb3_disagree.evaluation.Evaluation` by label
     """
     first = config.get("seed", 0) + FINAL_EVAL_SEED_OFFSET if seed is None else seed
     return {label: evaluate_alone(model, config, episodes, label == "greedy", first) for label in labels}
@@ -105,12 +107,9 @@ def evaluate_alone(model: Any, config: dict[str, Any], episodes: int, determinis
     :param episodes: Number of episodes
     :param deterministic: Greedy actions if True, sampled otherwise
     :param seed: Seed of the first env
-    :return: The :class:`~sb3_disagree.prior_training.Evaluation`
+    :return: The :class:`~sb3_disagree.evaluation.Evaluation`
     """
-    from sb3_disagree.prior_training import evaluate, make_env
-    from sb3_disagree.zoo import space_fits, space_to_dict
-
-    env = make_env(config["env_id"], config["goal"], config.get("env_kwargs") or {}, n_envs=4, seed=seed)
+    env = make_vec(config["env_id"], config["goal"], config.get("env_kwargs") or {}, n_envs=4, seed=seed)
     try:
         for kind in ("observation", "action"):
             theirs = getattr(model, f"{kind}_space")

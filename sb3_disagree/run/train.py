@@ -23,13 +23,13 @@ from stable_baselines3.common.callbacks import BaseCallback, CallbackList
 from sb3_disagree.acer import ACER
 from sb3_disagree.checkpoints import Checkpoint, latest_checkpoint, save_checkpoint, sigterm_as_interrupt, truncate_logs
 from sb3_disagree.files import write_atomic
-from sb3_disagree.options import make_options
+from sb3_disagree.options import PriorSet, make_options
+from sb3_disagree.priors.select import choose_priors, guide_horizon
 from sb3_disagree.run.config import RunConfig
 from sb3_disagree.run.envs import build_env
 from sb3_disagree.run.evaluation import EvaluateAlone
 from sb3_disagree.run.logs import run_logger
 from sb3_disagree.run.models import algorithm_of, new_model
-from sb3_disagree.run.priors import choose_priors, guide_horizon
 from sb3_disagree.run.trajectories import RecordTrajectories
 
 def train(config: RunConfig, out: Path = Path("runs"), resume: Optional[Path] = None,
@@ -83,10 +83,13 @@ def train(config: RunConfig, out: Path = Path("runs"), resume: Optional[Path] = 
         env = build_env(config, run_dir, append=resume is not None)
         behaviour, prior_names, sims, priors = None, [], [], None
         if config.mode not in ("scratch", "ppo"):
-            prior_names, sims, priors = choose_priors(config, env)
+            prior_names, sims, models = choose_priors(config.goal, config.env_id, env, config.priors, config.zoo,
+                                                      config.embedding)
+            priors = PriorSet(models)
             if on_priors:
                 on_priors(prior_names, sims)
-            horizon = config.jsrl_horizon or guide_horizon(config, prior_names) if config.mode == "jsrl" else 0
+            horizon = (config.jsrl_horizon or guide_horizon(config.env_id, prior_names, config.zoo)
+                       if config.mode == "jsrl" else 0)
             behaviour = make_options(config.mode, priors, config.alpha, config.beta, config.entropy_offset,
                                      seed=config.seed, horizon=horizon)
         saved_config = dict(asdict(config), chosen_priors=prior_names, similarities=sims)

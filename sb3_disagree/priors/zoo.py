@@ -25,7 +25,7 @@ from sb3_disagree.files import write_atomic
 
 CARD = "card.json"
 MODEL = "model.zip"
-DEFAULT_ZOO = Path(__file__).resolve().parent / "data" / "zoo"  # the shipped zoo, package data
+DEFAULT_ZOO = Path(__file__).resolve().parent.parent / "data" / "zoo"  # the shipped zoo, package data
 # Algorithms whose policies expose a discrete action distribution (``policy.get_distribution``).
 DISTRIBUTION_CLASSES = {
     "ACER": "sb3_disagree.acer.ACER",
@@ -60,22 +60,6 @@ def _channel_first(space: dict[str, Any]) -> dict[str, Any]:
     if space.get("type") == "Box" and space.get("dtype") == "uint8" and shape and len(shape) == 3 and shape[-1] in (1, 3, 4):
         return dict(space, shape=[shape[-1], *shape[:-1]])
     return space
-
-
-def _make_env(env_id: str, goal: str, env_kwargs: Optional[dict[str, Any]]):
-    """The environment a prior is added for (not reset: nothing is rendered), or a ZooError saying why not."""
-    import gymnasium as gym
-
-    import sb3_disagree.envs  # noqa: F401  (registers the environments)
-
-    if env_id not in gym.registry:
-        raise ZooError(f"unknown environment {env_id!r}")
-    try:
-        env = gym.make(env_id, goal=goal, **(env_kwargs or {}))
-    except (TypeError, ValueError, KeyError) as exc:
-        raise ZooError(f"{env_id} has no task {goal!r} with {env_kwargs or {}}: {exc}") from None
-    env.close()
-    return env
 
 
 def space_fits(recorded: dict[str, Any], space: spaces.Space) -> bool:
@@ -184,7 +168,7 @@ def algorithm_class(path: str) -> type:
     if path not in DISTRIBUTION_CLASSES.values() and path not in _REGISTERED:
         raise ZooError(f"a card names the algorithm {path!r}, which is neither a known one "
                        f"({', '.join(DISTRIBUTION_CLASSES.values())}) nor registered with "
-                       "sb3_disagree.zoo.register_algorithm")
+                       "sb3_disagree.priors.register_algorithm")
     module, _, name = path.rpartition(".")
     return getattr(importlib.import_module(module), name)
 
@@ -330,7 +314,12 @@ class Zoo:
 
         model_path = Path(model_path)
         safe_name(goal, "the goal")
-        env = _make_env(env_id, goal, env_kwargs)  # everything is checked before anything is written
+        from sb3_disagree.envs.vec import make_task
+
+        try:
+            env = make_task(env_id, goal, env_kwargs)  # everything is checked before anything is written
+        except ValueError as exc:
+            raise ZooError(str(exc)) from None
         check_model_file(model_path)
         sb3_class = identify_algorithm(model_path)
         try:

@@ -8,73 +8,22 @@ its current state (the apartment does); DAgger needs nothing else.
 
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
 from typing import Any, Optional
 
 import numpy as np
 import torch as th
 from stable_baselines3.common.base_class import BaseAlgorithm
-from stable_baselines3.common.env_util import make_vec_env
 from stable_baselines3.common.preprocessing import is_image_space
 from stable_baselines3.common.vec_env import VecEnv
 
 from sb3_disagree.acer import ACER
 from sb3_disagree.defaults import PRIOR_VALIDATION_SEED
+from sb3_disagree.envs.vec import make_vec
+from sb3_disagree.evaluation import Evaluation, evaluate
 
 METHODS = ("dagger", "acer", "ppo")
 # Small image networks keep a zoo of ten priors well under 60 MB.
 PRIOR_POLICY_KWARGS = {"CnnPolicy": dict(features_extractor_kwargs=dict(features_dim=128)), "MlpPolicy": {}}
-
-
-@dataclass
-class Evaluation:
-    """Success rate, episode length and return of a policy acting alone."""
-
-    success_rate: float
-    mean_length: float
-    mean_return: float
-    episodes: int
-    deterministic: bool
-    per_episode: dict[str, list] = field(default_factory=dict)  # successes, returns, lengths; not in as_dict
-
-    def as_dict(self) -> dict[str, Any]:
-        return {"success_rate": self.success_rate, "mean_length": self.mean_length, "mean_return": self.mean_return,
-                "episodes": self.episodes, "deterministic": self.deterministic}
-
-
-def make_env(env_id: str, goal: str, env_kwargs: Optional[dict] = None, n_envs: int = 1, seed: int = 0) -> VecEnv:
-    """A VecEnv of the task ``goal`` in ``env_id``, each env in a Monitor."""
-    import sb3_disagree.envs  # noqa: F401  (registers the environments)
-
-    return make_vec_env(env_id, n_envs=n_envs, seed=seed, env_kwargs=dict(goal=goal, **(env_kwargs or {})))
-
-
-def evaluate(model: BaseAlgorithm, env: VecEnv, episodes: int = 100, deterministic: bool = True,
-             progress: Optional[Callable[[int], None]] = None) -> Evaluation:
-    """
-    Run the policy alone for a number of episodes from the env's start distribution, with SB3's own
-    ``evaluate_policy`` (which carries a policy's state, such as a frame stack, between steps).
-
-    :param model: The policy
-    :param env: The environment (a VecEnv of Monitor-wrapped envs that report ``is_success``)
-    :param episodes: Number of episodes
-    :param deterministic: Greedy actions if True, sampled otherwise
-    :param progress: Called with the number of finished episodes
-    """
-    from stable_baselines3.common.evaluation import evaluate_policy
-
-    successes: list[bool] = []
-
-    def on_step(local: dict[str, Any], _: dict[str, Any]) -> None:
-        if local["done"]:
-            successes.append(bool(local["info"].get("is_success", False)))
-            if progress:
-                progress(len(successes))
-
-    returns, lengths = evaluate_policy(model, env, n_eval_episodes=episodes, deterministic=deterministic,
-                                       return_episode_rewards=True, callback=on_step)
-    return Evaluation(float(np.mean(successes)), float(np.mean(lengths)), float(np.mean(returns)), len(lengths),
-                      deterministic, dict(successes=successes, returns=list(returns), lengths=list(lengths)))
 
 
 def policy_name(env: VecEnv) -> str:
@@ -244,14 +193,14 @@ def evaluate_entry(zoo: Any, entry: Any, episodes: int, deterministic: bool, see
     """
     A zoo entry alone for some episodes on 4 envs seeded from ``seed``.
 
-    :param zoo: The :class:`~sb3_disagree.zoo.Zoo`
+    :param zoo: The :class:`~sb3_disagree.priors.zoo.Zoo`
     :param entry: Its entry
     :param episodes: Number of episodes
     :param deterministic: Greedy actions if True, sampled otherwise
     :param seed: Env seed of the first env
     :param progress: Called with the number of finished episodes
     """
-    venv = make_env(entry.env_id, entry.goal, entry.card.env_kwargs if entry.card else {}, n_envs=4, seed=seed)
+    venv = make_vec(entry.env_id, entry.goal, entry.card.env_kwargs if entry.card else {}, n_envs=4, seed=seed)
     try:
         return evaluate(zoo.load(entry, venv, device="cpu"), venv, episodes, deterministic, progress)
     finally:
@@ -265,7 +214,7 @@ def make_prior(zoo: Any, goal: str, env_id: str, method: str = "dagger", steps: 
     Train a prior, add it to the zoo, and record its evaluation alone (greedy and sampled) on its card: what
     ``dopt priors train`` does, in one call.
 
-    :param zoo: The :class:`~sb3_disagree.zoo.Zoo` to add it to
+    :param zoo: The :class:`~sb3_disagree.priors.zoo.Zoo` to add it to
     :param goal: The goal it learns to reach
     :param env_id: The environment
     :param method: "dagger" (imitate the env's expert), "acer" or "ppo"
@@ -290,10 +239,10 @@ def make_prior(zoo: Any, goal: str, env_id: str, method: str = "dagger", steps: 
         raise ValueError(f"the zoo already has a prior for {goal!r} in {env_id}; pass --replace to retrain it")
     if dagger_kwargs.get("validation_episodes", 0) < 0:
         raise ValueError(f"--validation-episodes must be >= 0, got {dagger_kwargs['validation_episodes']}")
-    venv = make_env(env_id, goal, n_envs=n_envs, seed=seed)
+    venv = make_vec(env_id, goal, n_envs=n_envs, seed=seed)
     if method == "dagger":
         validation = dagger_kwargs.get("validation_episodes", 0)
-        validation_env = make_env(env_id, goal, n_envs=n_envs, seed=PRIOR_VALIDATION_SEED) if validation else None
+        validation_env = make_vec(env_id, goal, n_envs=n_envs, seed=PRIOR_VALIDATION_SEED) if validation else None
         model, record = train_dagger(venv, seed=seed, validation_env=validation_env,
                                      validation_seed=PRIOR_VALIDATION_SEED, progress=progress, **dagger_kwargs)
     else:
