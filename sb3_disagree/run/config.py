@@ -49,9 +49,9 @@ class RunConfig:
     :param eval_episodes: Episodes per evaluation
     :param vec_env: "dummy" (envs stepped in this process) or "subproc" (one process per env: their
         rendering runs in parallel on several cores)
-    :param overlap: ACER's replay updates in a second thread while the next segment is collected (faster
-        on two cores; see ``ACER``'s ``overlap``). ``dopt train`` turns it on; off here, so that the
-        experiments keep the sequential loop their figures were made with unless a cell asks for it
+    :param overlap: ACER's replay updates in a second thread while the next segment is collected (faster on two
+        cores). Off in the library and the experiments (the sequential loop their figures were made with); on in
+        dopt train
     :param frame_stack: The new policy sees its last this many observations (its memory; 1: the current one);
         the priors keep their single observation
     :param jsrl_horizon: Mode "jsrl": the guide's horizon at the start, in steps; 0 for the priors' mean

@@ -1,5 +1,6 @@
 """The new policy alone: along a run (greedy and sampled), after it, and on its model card."""
 
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any, Optional
 
@@ -13,6 +14,7 @@ from sb3_disagree.evaluation import evaluate
 from sb3_disagree.priors.zoo import space_fits, space_to_dict
 from sb3_disagree.run.config import RunConfig
 from sb3_disagree.run.envs import build_env
+from sb3_disagree.run.models import algorithm_of
 
 class EvaluateAlone(BaseCallback):
     """
@@ -119,3 +121,31 @@ def evaluate_alone(model: Any, config: dict[str, Any], episodes: int, determinis
         return evaluate(model, env, episodes, deterministic=deterministic)
     finally:
         env.close()
+
+
+def evaluate_run(path: Path, episodes: int = 100, seed: Optional[int] = None,
+                 labels: Sequence[str] = ("greedy", "sampled")) -> tuple[dict[str, Any], dict[str, Any]]:
+    """
+    A trained run's policy alone, loaded from its folder (or its ``model.zip``) as a user would load it.
+
+    :param path: A run folder, or a ``model.zip`` with the run's ``config.yaml`` beside it
+    :param episodes: Episodes each way
+    :param seed: Env seed of the first env (default: the run's seed + ``FINAL_EVAL_SEED_OFFSET``)
+    :param labels: "greedy" and/or "sampled"
+    :return: The run's configuration and the :class:`~sb3_disagree.evaluation.Evaluation` by label
+    """
+    path = Path(path)
+    run_dir = path if path.is_dir() else path.parent
+    model_path = path / "model.zip" if path.is_dir() else path
+    if not model_path.exists():
+        raise FileNotFoundError(f"no model at {model_path}")
+    cfg_path = run_dir / "config.yaml"
+    if not cfg_path.exists():
+        raise FileNotFoundError(f"{cfg_path} is missing: it names the environment and goal to evaluate in")
+    config = yaml.safe_load(cfg_path.read_text())
+    algorithm = algorithm_of(config.get("mode", "disagreement"))
+    try:
+        model = algorithm.load(model_path, device="cpu")
+    except Exception as exc:  # a damaged file, or another algorithm's
+        raise ValueError(f"{model_path} could not be loaded as {algorithm.__name__}: {exc}") from None
+    return config, evaluate_both(model, config, episodes, seed, tuple(labels))

@@ -13,7 +13,7 @@ import pickle
 import shutil
 import zipfile
 from collections.abc import Callable
-from dataclasses import asdict
+from dataclasses import asdict, fields
 from pathlib import Path
 from typing import Optional
 
@@ -129,6 +129,32 @@ def train(config: RunConfig, out: Path = Path("runs"), resume: Optional[Path] = 
     env.close()
     return run_dir, model, finished
 
+
+
+def check_resume(config: RunConfig, resume: Path, force: bool = False) -> None:
+    """
+    A resumed run keeps its saved settings: a ValueError if ``config`` changes one of them (any field not at its
+    default besides the goal, the budget and the loop), rather than dropping it silently.
+
+    :param config: The settings asked for
+    :param resume: The run folder to continue
+    :param force: Whether replacing the run was asked for too (a contradiction)
+    """
+    if force:
+        raise ValueError("--force replaces a run and --resume continues one: choose one")
+    saved_path = Path(resume) / "config.yaml"
+    if not saved_path.exists():
+        raise FileNotFoundError(f"{resume} is not a run folder with config.yaml and model.zip to resume")
+    saved = yaml.safe_load(saved_path.read_text())
+    if saved.get("goal") != config.goal:
+        raise ValueError(f"{resume} trains the goal {saved.get('goal')!r}, not {config.goal!r}")
+    defaults = RunConfig(goal=config.goal)
+    # The loop (overlap) is the saved one whatever is asked; steps is the new budget.
+    given = [f.name for f in fields(RunConfig) if f.name not in ("goal", "steps", "overlap", "acer_kwargs")
+             and getattr(config, f.name) != getattr(defaults, f.name)]
+    if given:
+        flags = ", ".join({"env_id": "--env"}.get(name, "--" + name.replace("_", "-")) for name in given)
+        raise ValueError(f"--resume continues {resume} with its saved settings; drop {flags}")
 
 def _resumed_model(config: RunConfig, run_dir: Path, env, behaviour, checkpoint):
     """The model a resumed run continues: from its newest complete checkpoint (with the replay buffer it kept),
