@@ -269,3 +269,42 @@ def record_evaluations(zoo: Any, entry: Any, episodes: int,
                                             (lambda n, label=label: progress(label, n)) if progress else None)
         entry = zoo.record_evaluation(entry, {**evaluations[label].as_dict(), "seed": PRIOR_CARD_SEED})
     return entry, evaluations
+
+
+def add_prior(zoo: Any, model_path: Any, env_id: str, goal: Optional[str] = None, episodes: int = 100,
+              replace: bool = False, command: str = "",
+              progress: Optional[Callable[[str, int], None]] = None) -> tuple[Any, dict[str, Evaluation]]:
+    """
+    Add a saved SB3 model to the zoo and record its evaluation alone (greedy and sampled) on its card: what
+    ``dopt priors add`` does. A model card beside the model (as ``dopt train`` writes) gives the goal and how
+    the model was trained. Loading a model file runs code it may hold (SB3 files are pickles): add only files
+    you trust.
+
+    :param zoo: The :class:`~sb3_disagree.priors.zoo.Zoo`
+    :param model_path: The model file
+    :param env_id: Its environment
+    :param goal: The goal it reaches (default: the goal on its model card)
+    :param episodes: Evaluation episodes each way for the card (0: none)
+    :param replace: Replace an existing prior for this goal
+    :param command: The command that added it, for the card
+    :param progress: Called with the label and the number of finished episodes
+    :return: The zoo entry (as read back) and the evaluations by label
+    """
+    from pathlib import Path
+
+    from sb3_disagree.model_card import CARD_NAME, read_model_card
+
+    model_path = Path(model_path)
+    if not model_path.exists():
+        raise FileNotFoundError(f"{model_path} does not exist")
+    run = read_model_card(model_path.parent / CARD_NAME).get("sb3_disagree") or {}
+    if goal is None:
+        if not run.get("goal"):
+            raise ValueError(f"--goal is needed: no model card with a goal beside {model_path}")
+        goal = str(run["goal"])
+    if run.get("env_id") and run["env_id"] != env_id:
+        raise ValueError(f"the model card beside {model_path} says it was trained in {run['env_id']}, not {env_id}; "
+                         f"pass --env {run['env_id']}")
+    made = {"model_card": {k: run.get(k) for k in ("mode", "steps", "seed", "command", "priors")}} if run else {}
+    entry = zoo.add(model_path, goal, env_id, training={"method": "external", **made}, command=command, replace=replace)
+    return record_evaluations(zoo, entry, episodes, progress) if episodes else (entry, {})

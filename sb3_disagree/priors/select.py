@@ -58,3 +58,20 @@ def guide_horizon(env_id: str, prior_names: Sequence[str], zoo: PathLike = None)
     if not lengths:
         raise ValueError("the priors' cards record no evaluation to take JSRL's horizon from; give jsrl_horizon")
     return max(1, int(round(float(np.mean(lengths)))))
+
+
+def rank_entries(goal: str, entries: Sequence[Any], embedding: Any, k: int = 2) -> tuple[dict[str, float], set[str]]:
+    """
+    The zoo's entries by similarity to ``goal``, as the method would choose among them.
+
+    :param goal: The new goal
+    :param entries: Zoo entries (:meth:`Zoo.entries`); damaged ones are ranked but never chosen
+    :param embedding: The word embedding
+    :param k: How many priors the goal would use
+    :return: Each entry's similarity to ``goal``, and the goals of the ``k`` usable ones chosen
+    """
+    from sb3_disagree.priors.language import rank_by_similarity
+
+    usable = {e.goal for e in entries if not e.problem}
+    ranked = rank_by_similarity(goal, [e.goal for e in entries], embedding)
+    return dict(ranked), {label for label, _ in [r for r in ranked if r[0] in usable][:k]}
