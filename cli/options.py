@@ -55,8 +55,9 @@ def options_of(obj: Any, only: Optional[Iterable[str]] = None, skip: Iterable[st
         decls = flags.get(p.name, flag(p.name))
         if kind is bool:
             decls = f"{decls}/--no-{decls[2:]}" if default is True else decls
-        out.append(inspect.Parameter(p.name, inspect.Parameter.KEYWORD_ONLY, annotation=kind,
-                                     default=typer.Option(default, decls, help=helps.get(p.name, ""))))
+        option = default if isinstance(default, typer.models.OptionInfo) else typer.Option(  # a command's own option
+            default, decls, help=helps.get(p.name, ""))
+        out.append(inspect.Parameter(p.name, inspect.Parameter.KEYWORD_ONLY, annotation=kind, default=option))
     return out
 
 

@@ -10,6 +10,7 @@ from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, T
 from rich.table import Table
 
 from sb3_disagree.cli.common import DEFAULT_ENV, clean_errors, command_line, console
+from sb3_disagree.cli.options import command, options_of, param_help
 from sb3_disagree.defaults import PRIOR_CARD_SEED as CARD_SEED
 from sb3_disagree.priors.language import load_embedding
 
@@ -173,41 +174,32 @@ def eval_prior(
                 console.print(f"recorded on {entry.path / 'card.json'}")
 
 
+def _make_options() -> list:
+    from sb3_disagree.priors.make import make_prior, train_dagger
+
+    return [*options_of(make_prior, only=("goal", "method", "env_id", "steps", "n_envs", "seed", "episodes", "replace"),
+                        flags={"env_id": "--env"}, defaults={"env_id": DEFAULT_ENV}),
+            *options_of(train_dagger, only=("rounds", "steps_per_round", "epochs", "final_epochs",
+                                            "validation_episodes", "learner_actions"),
+                        helps={k: "DAgger: " + v for k, v in param_help(train_dagger).items()}),
+            *options_of(list_priors, only=("zoo",))]
+
+
 @app.command()
-def train(
-    goal: str = typer.Option(..., "--goal", help="The goal object to reach."),
-    method: str = typer.Option("dagger", "--method", help="dagger (imitate the expert), acer or ppo."),
-    env: str = ENV_OPT,
-    steps: int = typer.Option(200_000, "--steps", help="Env steps for acer/ppo."),
-    rounds: int = typer.Option(6, "--rounds", help="DAgger rounds."),
-    steps_per_round: int = typer.Option(3_000, "--steps-per-round", help="Labelled steps per DAgger round."),
-    epochs: int = typer.Option(6, "--epochs", help="DAgger passes over the data per round."),
-    final_epochs: int = typer.Option(0, "--final-epochs", help="DAgger passes over all labels at the end, "
-                                     "learning rate decayed to zero."),
-    validation_episodes: int = typer.Option(0, "--validation-episodes",
-                                            help="DAgger: evaluate each round's policy on this many episodes (env "
-                                            "seeds 20000+) and keep the best round's, not the last (0: the last)."),
-    learner_actions: str = typer.Option("sampled", "--learner-actions", help="DAgger: how the learner acts in "
-                                        "the rounds it leads, sampled or greedy (visits where a greedy policy gets "
-                                        "stuck, so that the expert labels them)."),
-    n_envs: int = typer.Option(4, "--n-envs"),
-    seed: int = typer.Option(0, "--seed"),
-    episodes: int = typer.Option(100, "--episodes", help="Evaluation episodes for the card."),
-    replace: bool = typer.Option(False, "--replace", help="Replace an existing prior for this goal."),
-    zoo: Optional[Path] = ZOO_OPT,
-) -> None:
+@command(_make_options())
+def train(**options) -> None:
     """Train a prior for a goal and add it to the zoo with its card (sb3_disagree.priors.make.make_prior)."""
     with clean_errors():
         from sb3_disagree.priors.make import make_prior
 
-        dagger = dict(rounds=rounds, steps_per_round=steps_per_round, epochs=epochs, final_epochs=final_epochs,
-                      validation_episodes=validation_episodes, learner_actions=learner_actions) if method == "dagger" else {}
+        goal, method, zoo = options.pop("goal"), options.pop("method"), options.pop("zoo")
+        dagger = {k: options.pop(k) for k in ("rounds", "steps_per_round", "epochs", "final_epochs",
+                                              "validation_episodes", "learner_actions")}
         with _progress() as progress:
-            task = progress.add_task(f"{method} {goal}", total=rounds if method == "dagger" else 1)
-            entry, evaluations = make_prior(_zoo(zoo), goal, env, method=method, steps=steps, n_envs=n_envs, seed=seed,
-                                            episodes=episodes, replace=replace, command=command_line(),
+            task = progress.add_task(f"{method} {goal}", total=dagger["rounds"] if method == "dagger" else 1)
+            entry, evaluations = make_prior(_zoo(zoo), goal, method=method, command=command_line(),
                                             progress=lambda line: (progress.advance(task), console.print(line)),
-                                            **dagger)
+                                            **options, **(dagger if method == "dagger" else {}))
         _show_evaluations(goal, evaluations)
 
 

@@ -16,7 +16,7 @@ PPO_KWARGS: dict[str, Any] = dict(n_steps=128, n_epochs=4, batch_size=256, learn
                                   ent_coef=0.01, vf_coef=0.5)
 # ACER on the apartment: images through NatureCNN; a buffer of 50k frames is 0.7 GB of uint8. Rewards scaled
 # by 0.1 (Q in units of the +10 goal / 10): at scale 1 the policy's entropy collapsed by 20k steps and the
-# new policy alone fell back to ~0 success; at 0.1 it trains stably (docs/results.md, "Choosing ACER's scale").
+# new policy alone fell back to ~0 success; at 0.1 it trains stably (docs/history.md, "Choosing ACER's scale").
 ACER_KWARGS: dict[str, Any] = dict(n_steps=20, buffer_size=50_000, replay_start=2_000, replay_ratio=4, ent_coef=0.01,
                                    learning_rate=7e-4, reward_scale=0.1)
 
