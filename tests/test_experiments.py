@@ -3,6 +3,7 @@
 import json
 
 import numpy as np
+import pandas as pd
 import pytest
 import yaml
 from typer.testing import CliRunner
@@ -49,6 +50,17 @@ def test_run_report_and_skip_finished(zoo, tmp_path):
     # Written atomically, yet readable by others (a temporary file's private mode is not kept).
     assert all(p.stat().st_mode & 0o777 == 0o644 for p in out.glob("*/seed-0/result.json"))
     assert not list(out.glob("*/seed-0/.result.json.*"))
+    # Each run keeps the few logged columns the report reads in curves.csv, the same values as progress.csv's.
+    from sb3_disagree.experiments.curves import CURVE_KEYS, progress_curve
+
+    run_dir = out / "disagreement" / "seed-0"
+    curves = pd.read_csv(run_dir / "curves.csv")
+    assert set(curves.columns) <= set(CURVE_KEYS) and "prior/usage" in curves
+    grid = np.linspace(10, 320, 20)
+    from_curves = progress_curve(run_dir, "prior/usage", grid)
+    (run_dir / "curves.csv").rename(run_dir / "curves.bak")
+    np.testing.assert_array_equal(from_curves, progress_curve(run_dir, "prior/usage", grid))
+    (run_dir / "curves.bak").rename(run_dir / "curves.csv")
     # A huge beta follows the priors whenever the branch is entered; scratch never does.
     usage = {c: yaml.safe_load((out / c / "seed-0" / "config.yaml").read_text()) for c in ("beta-big", "scratch")}
     assert usage["beta-big"]["beta"] == 100.0 and usage["scratch"]["chosen_priors"] == []
