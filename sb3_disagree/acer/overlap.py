@@ -11,16 +11,13 @@ import contextlib
 import copy
 from collections.abc import Callable, Iterator
 from concurrent.futures import Future, ThreadPoolExecutor
-from typing import TYPE_CHECKING
+from typing import Any
 
 import numpy as np
 import torch as th
 
 from sb3_disagree.acer.buffers import Segment
 from sb3_disagree.acer.policies import ACERPolicy
-
-if TYPE_CHECKING:
-    from sb3_disagree.acer.acer import ACER
 
 
 def copy_learner(learner: ACERPolicy, policy: ACERPolicy) -> None:
@@ -31,14 +28,14 @@ def copy_learner(learner: ACERPolicy, policy: ACERPolicy) -> None:
 
 
 @contextlib.contextmanager
-def overlapped_updates(model: "ACER") -> Iterator[Callable[[Segment], None]]:
+def overlapped_updates(model: Any) -> Iterator[Callable[[Segment], None]]:
     """
     A function that learns from each collected segment: it does the on-policy update on a learner copy of
     the policy, copies the learner into ``model.policy`` (which the rollouts act with) and hands the segment's
     replay updates to a second thread. Leaving the context (also on an interruption) waits for the last
     replay updates: what was collected is learned.
 
-    :param model: The ACER model whose ``learn`` collects the segments
+    :param model: The ACER model whose ``learn`` collects the segments (not imported here: ACER imports this)
     """
     learner = copy.deepcopy(model.policy)
     # The replay draws get their own generators (counts here, segments in the worker): the rollouts in this
