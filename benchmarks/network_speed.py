@@ -42,7 +42,7 @@ def main() -> None:
     parser.add_argument("--repeats", type=int, default=5)
     parser.add_argument("--write", action="store_true")
     args = parser.parse_args()
-    from sb3_disagree.zoo import Zoo
+    from sb3_disagree.priors.zoo import Zoo
 
     zoo = Zoo()
     nets = [zoo.load(zoo.get(goal, "sb3_disagree/Apartment-v0"), device="cpu").policy.net for goal in ("shower", "toilet")]

@@ -15,6 +15,7 @@ import torch as th
 from train_speed import acer_rate
 
 from sb3_disagree.acer import ACER
+from sb3_disagree.acer import overlap
 
 
 def timed(times: dict[str, list[float]], name: str, method):
@@ -36,8 +37,9 @@ def main() -> None:
     th.set_num_threads(args.threads)
     times: dict[str, list[float]] = defaultdict(list)
     for name, attr in [("rollout", "collect_rollouts"), ("on-policy update", "_on_policy_update"),
-                       ("replay updates", "_replay"), ("copy to the acting policy", "_sync_policy")]:
+                       ("replay updates", "_replay")]:
         setattr(ACER, attr, timed(times, name, getattr(ACER, attr)))
+    overlap.copy_learner = timed(times, "copy to the acting policy", overlap.copy_learner)
     rate = acer_rate("disagreement", args.steps, args.warm, "dummy", overlap=True)
     segments = args.steps // 80  # 4 envs x 20 steps: the segments after the warm-up
     print(f"env steps/s after the warm-up: {rate:.0f}; per segment (mean of the last {segments}):")

@@ -9,7 +9,7 @@ import numpy as np
 from docs_section import DOCS, write_section
 from scipy.stats import spearmanr
 
-from sb3_disagree.language import load_embedding
+from sb3_disagree.priors.language import load_embedding
 from sb3_disagree.plots import similarity_heatmap
 
 WORDS = ["shower", "bathtub", "toilet", "bed", "wardrobe", "nightstand", "stove", "toaster", "table", "microwave",

@@ -7,7 +7,7 @@ sampled, size).
 
 from docs_section import write_section
 
-from sb3_disagree.zoo import Zoo
+from sb3_disagree.priors.zoo import Zoo
 
 
 def _success(ev: dict) -> str:

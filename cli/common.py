@@ -9,8 +9,8 @@ from rich.console import Console
 from rich.markup import escape
 
 from sb3_disagree.defaults import DEFAULT_ENV  # noqa: F401  (the one definition, for the commands)
-from sb3_disagree.language import NotEnoughPriorsError, UnknownWordError
-from sb3_disagree.zoo import ZooError
+from sb3_disagree.priors.language import NotEnoughPriorsError, UnknownWordError
+from sb3_disagree.priors.zoo import ZooError
 
 console = Console()
 err_console = Console(stderr=True)

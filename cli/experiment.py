@@ -10,8 +10,8 @@ from sb3_disagree.cli.common import clean_errors, console
 
 app = typer.Typer(help="Named experiments: grids of runs with curves and a table over seeds.", no_args_is_help=True)
 
-OUT_OPT = typer.Option(None, "--out", help="Results folder (default: benchmarks/results/experiments/NAME).")
-DEFAULT_ROOT = Path("benchmarks") / "results" / "experiments"
+OUT_OPT = typer.Option(None, "--out", help="Results folder (default: runs/experiments/NAME).")
+DEFAULT_ROOT = Path("runs") / "experiments"
 
 
 def _root(name: str, out: Optional[Path]) -> Path:
@@ -85,27 +85,19 @@ def report(
     out: Optional[Path] = OUT_OPT,
     figure: Optional[Path] = typer.Option(None, "--figure", help="Also write the figure here (PNG)."),
     seeds: Optional[str] = SEEDS_OPT,
+    note: str = typer.Option("", "--note", help="What else ran on the machine meanwhile, said beside the machine."),
+    section: Optional[Path] = typer.Option(None, "--section", help="Also write the report into this markdown page, "
+                                           "between its <!-- NAME:start --> and <!-- NAME:end --> lines."),
 ) -> None:
     """Curves (mean and 95% band over seeds) and the table; writes report.md and a PNG in the results folder.
     ``--seeds`` compares cells on the seeds they share where some have more finished than others."""
     with clean_errors():
-        import shutil
-
-        from sb3_disagree.experiments.report import plot, summarize, table_markdown
         from sb3_disagree.experiments.spec import load_experiment
+        from sb3_disagree.experiments.writeup import write_report
 
         experiment = load_experiment(name)
         experiment.restrict(seeds=_seeds(seeds))
         root = _root(experiment.name, out)
-        grid, summaries = summarize(experiment, root)
-        if not summaries:
-            raise FileNotFoundError(f"no finished runs of {experiment.name} in {root}; run: dopt experiment run {name}")
-        png = root / f"{experiment.name}.png"
-        plot(experiment, grid, summaries, png, root)
-        markdown = table_markdown(experiment, summaries)
-        (root / "report.md").write_text(f"# {experiment.name}\n\n![{experiment.name}]({png.name})\n\n{markdown}\n")
-        if figure is not None:
-            figure.parent.mkdir(parents=True, exist_ok=True)
-            shutil.copyfile(png, figure)
-        console.print(markdown)
-        console.print(f"wrote {root / 'report.md'} and {png}")
+        console.print(write_report(experiment, root, figure, note, section, _seeds(seeds)))
+        console.print(f"wrote {root / 'report.md'} and {root / (experiment.name + '.png')}"
+                      + (f"; the section {experiment.name} of {section}" if section else ""))

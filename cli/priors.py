@@ -10,9 +10,9 @@ from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, T
 from rich.table import Table
 
 from sb3_disagree.cli.common import DEFAULT_ENV, clean_errors, command_line, console
+from sb3_disagree.cli.options import command, options_of, param_help
 from sb3_disagree.defaults import PRIOR_CARD_SEED as CARD_SEED
-from sb3_disagree.defaults import PRIOR_VALIDATION_SEED as VALIDATION_SEED
-from sb3_disagree.language import load_embedding, rank_by_similarity
+from sb3_disagree.priors.language import load_embedding
 
 app = typer.Typer(help="The prior zoo: list, show, add, remove, evaluate and train priors.", no_args_is_help=True)
 
@@ -22,7 +22,7 @@ EMB_OPT = typer.Option(None, "--embedding", help="Word vectors (word2vec/GloVe/f
 
 
 def _zoo(path: Optional[Path]):
-    from sb3_disagree.zoo import Zoo
+    from sb3_disagree.priors.zoo import Zoo
 
     return Zoo(path)
 
@@ -73,37 +73,37 @@ def list_priors(
 ) -> None:
     """The zoo as a table; damaged entries are listed with their problem."""
     with clean_errors():
+        from sb3_disagree.priors.select import rank_entries
+
         entries = _zoo(zoo).entries(env or (DEFAULT_ENV if goal else None))
-        sims: dict[str, float] = {}
-        chosen: set[str] = set()
-        if goal:
-            usable = [e.goal for e in entries if not e.problem]
-            ranked = rank_by_similarity(goal, [e.goal for e in entries], load_embedding(embedding))
-            sims = dict(ranked)
-            chosen = {label for label, _ in [r for r in ranked if r[0] in usable][:k]}
-            entries.sort(key=lambda e: -sims.get(e.goal, 2.0))
-        envs = sorted({e.env_id for e in entries})
-        table = Table(title=(f"priors for {goal!r}" if goal else "prior zoo") + (f" in {envs[0]}" if len(envs) == 1 else ""))
-        table.add_column("goal", no_wrap=True)
-        if len(envs) > 1:
-            table.add_column("env", overflow="fold")
-        for col in ["algorithm", "method", "steps", "success greedy", "success sampled",
-                    *(["similarity", ""] if goal else []), "status"]:
-            table.add_column(col, no_wrap=col in ("similarity", ""))
-        for e in entries:
-            card = e.card
-            success = [(c.get("success_rate") if card else None) for c in
-                       ((card.evaluation_greedy, card.evaluation) if card else ({}, {}))]
-            row = [e.goal, *([e.env_id] if len(envs) > 1 else []), card.sb3_class.rsplit(".", 1)[-1] if card else "?",
-                   str(card.training.get("method", "?")) if card else "?", str(card.training.get("steps", "?")) if card else "?",
-                   *(f"{v:.2f}" if v is not None else "-" for v in success)]
-            if goal:
-                row += [f"{sims[e.goal]:.3f}" if e.goal in sims else "(goal)", "[bold green]chosen[/]" if e.goal in chosen else ""]
-            row.append("[green]ok[/]" if not e.problem else f"[red]{e.problem}[/]")
-            table.add_row(*row)
-        console.print(table)
+        sims, chosen = rank_entries(goal, entries, load_embedding(embedding), k) if goal else ({}, set())
+        entries.sort(key=lambda e: -sims.get(e.goal, 2.0))
+        console.print(_zoo_table(entries, goal, sims, chosen))
         if goal and len(chosen) < k:
             console.print(f"[yellow]only {len(chosen)} usable prior(s) besides {goal!r}; the method needs {k}[/]")
+
+
+def _zoo_table(entries: list, goal: Optional[str], sims: dict[str, float], chosen: set[str]) -> Table:
+    envs = sorted({e.env_id for e in entries})
+    table = Table(title=(f"priors for {goal!r}" if goal else "prior zoo") + (f" in {envs[0]}" if len(envs) == 1 else ""))
+    table.add_column("goal", no_wrap=True)
+    if len(envs) > 1:
+        table.add_column("env", overflow="fold")
+    for col in ["algorithm", "method", "steps", "success greedy", "success sampled",
+                *(["similarity", ""] if goal else []), "status"]:
+        table.add_column(col, no_wrap=col in ("similarity", ""))
+    for e in entries:
+        card = e.card
+        success = [(c.get("success_rate") if card else None) for c in
+                   ((card.evaluation_greedy, card.evaluation) if card else ({}, {}))]
+        row = [e.goal, *([e.env_id] if len(envs) > 1 else []), card.sb3_class.rsplit(".", 1)[-1] if card else "?",
+               str(card.training.get("method", "?")) if card else "?", str(card.training.get("steps", "?")) if card else "?",
+               *(f"{v:.2f}" if v is not None else "-" for v in success)]
+        if goal:
+            row += [f"{sims[e.goal]:.3f}" if e.goal in sims else "(goal)", "[bold green]chosen[/]" if e.goal in chosen else ""]
+        row.append("[green]ok[/]" if not e.problem else f"[red]{e.problem}[/]")
+        table.add_row(*row)
+    return table
 
 
 @app.command()
@@ -126,29 +126,19 @@ def add(
     zoo: Optional[Path] = ZOO_OPT,
 ) -> None:
     """Add a saved model to the zoo, evaluated and with its card; a model card beside the model (as dopt train
-    writes) gives the goal and how the model was trained."""
+    writes) gives the goal and how the model was trained (sb3_disagree.priors.make.add_prior)."""
     with clean_errors():
-        from sb3_disagree.model_card import CARD_NAME, read_model_card
+        from sb3_disagree.priors.make import add_prior
 
-        if not model.exists():
-            raise FileNotFoundError(f"{model} does not exist")
-        run = read_model_card(model.parent / CARD_NAME).get("sb3_disagree") or {}
-        if goal is None:
-            if not run.get("goal"):
-                raise ValueError(f"--goal is needed: no model card with a goal beside {model}")
-            goal = str(run["goal"])
-        if run.get("env_id") and run["env_id"] != env:
-            raise ValueError(f"the model card beside {model} says it was trained in {run['env_id']}, not {env}; "
-                             f"pass --env {run['env_id']}")
-        training = {"method": "external", **({"model_card": {k: run.get(k) for k in ("mode", "steps", "seed", "command",
-                                                                                    "priors")}} if run else {})}
         z = _zoo(zoo)
         console.print(f"[yellow]note:[/] loading {model} runs code it may hold (SB3 model files are pickles): add "
                       "only files you trust (docs/survival.md)")
-        entry = z.add(model, goal, env, training=training, command=command_line(), replace=replace)
-        if episodes:
-            _evaluate_into_card(z, entry, episodes)
-        console.print(f"added {goal!r} to {z.root}")
+        with _progress() as progress:
+            tasks = {label: progress.add_task(f"evaluating ({label})", total=episodes) for label in ("greedy", "sampled")}
+            entry, evaluations = add_prior(z, model, env, goal, episodes, replace, command_line(),
+                                           lambda label, n: progress.update(tasks[label], completed=n))
+        _show_evaluations(entry.goal, evaluations)
+        console.print(f"added {entry.goal!r} to {z.root}")
 
 
 @app.command()
@@ -184,66 +174,47 @@ def eval_prior(
                 console.print(f"recorded on {entry.path / 'card.json'}")
 
 
-@app.command()
-def train(
-    goal: str = typer.Option(..., "--goal", help="The goal object to reach."),
-    method: str = typer.Option("dagger", "--method", help="dagger (imitate the expert), acer or ppo."),
-    env: str = ENV_OPT,
-    steps: int = typer.Option(200_000, "--steps", help="Env steps for acer/ppo."),
-    rounds: int = typer.Option(6, "--rounds", help="DAgger rounds."),
-    steps_per_round: int = typer.Option(3_000, "--steps-per-round", help="Labelled steps per DAgger round."),
-    epochs: int = typer.Option(6, "--epochs", help="DAgger passes over the data per round."),
-    final_epochs: int = typer.Option(0, "--final-epochs", help="DAgger passes over all labels at the end, "
-                                     "learning rate decayed to zero."),
-    validation_episodes: int = typer.Option(0, "--validation-episodes",
-                                            help="DAgger: evaluate each round's policy on this many episodes (env "
-                                            "seeds 20000+) and keep the best round's, not the last (0: the last)."),
-    learner_actions: str = typer.Option("sampled", "--learner-actions", help="DAgger: how the learner acts in "
-                                        "the rounds it leads, sampled or greedy (visits where a greedy policy gets "
-                                        "stuck, so that the expert labels them)."),
-    n_envs: int = typer.Option(4, "--n-envs"),
-    seed: int = typer.Option(0, "--seed"),
-    episodes: int = typer.Option(100, "--episodes", help="Evaluation episodes for the card."),
-    replace: bool = typer.Option(False, "--replace", help="Replace an existing prior for this goal."),
-    zoo: Optional[Path] = ZOO_OPT,
-) -> None:
-    """Train a prior for a goal and add it to the zoo with its card (sb3_disagree.prior_training.make_prior)."""
-    with clean_errors():
-        from sb3_disagree.prior_training import make_prior
+def _make_options() -> list:
+    from sb3_disagree.priors.make import make_prior, train_dagger
 
-        dagger = dict(rounds=rounds, steps_per_round=steps_per_round, epochs=epochs, final_epochs=final_epochs,
-                      validation_episodes=validation_episodes, learner_actions=learner_actions) if method == "dagger" else {}
+    return [*options_of(make_prior, only=("goal", "method", "env_id", "steps", "n_envs", "seed", "episodes", "replace"),
+                        flags={"env_id": "--env"}, defaults={"env_id": DEFAULT_ENV}),
+            *options_of(train_dagger, only=("rounds", "steps_per_round", "epochs", "final_epochs",
+                                            "validation_episodes", "learner_actions"),
+                        helps={k: "DAgger: " + v for k, v in param_help(train_dagger).items()}),
+            *options_of(list_priors, only=("zoo",))]
+
+
+@app.command()
+@command(_make_options())
+def train(**options) -> None:
+    """Train a prior for a goal and add it to the zoo with its card (sb3_disagree.priors.make.make_prior)."""
+    with clean_errors():
+        from sb3_disagree.priors.make import make_prior
+
+        goal, method, zoo = options.pop("goal"), options.pop("method"), options.pop("zoo")
+        dagger = {k: options.pop(k) for k in ("rounds", "steps_per_round", "epochs", "final_epochs",
+                                              "validation_episodes", "learner_actions")}
         with _progress() as progress:
-            task = progress.add_task(f"{method} {goal}", total=rounds if method == "dagger" else 1)
-            entry, evaluations = make_prior(_zoo(zoo), goal, env, method=method, steps=steps, n_envs=n_envs, seed=seed,
-                                            episodes=episodes, replace=replace, command=command_line(),
+            task = progress.add_task(f"{method} {goal}", total=dagger["rounds"] if method == "dagger" else 1)
+            entry, evaluations = make_prior(_zoo(zoo), goal, method=method, command=command_line(),
                                             progress=lambda line: (progress.advance(task), console.print(line)),
-                                            **dagger)
-        for label, result in evaluations.items():
-            console.print(f"{goal}: success {result.success_rate:.2f} over {result.episodes} episodes ({label}), "
-                          f"mean length {result.mean_length:.1f}")
+                                            **options, **(dagger if method == "dagger" else {}))
+        _show_evaluations(goal, evaluations)
 
 
 def _evaluate(z, entry, episodes: int, deterministic: bool, seed: int):
     """Run a zoo entry alone for some episodes on 4 envs seeded from ``seed``, with a progress display."""
-    from sb3_disagree.prior_training import evaluate_entry
+    from sb3_disagree.priors.make import evaluate_entry
 
     with _progress() as progress:
         task = progress.add_task(f"evaluating {entry.goal}", total=episodes)
         return evaluate_entry(z, entry, episodes, deterministic, seed, lambda n: progress.update(task, completed=n))
 
 
-def _evaluate_into_card(z, entry, episodes: int) -> None:
-    """Evaluate a new entry with greedy and sampled actions and record both on its card (with a progress display)."""
-    from sb3_disagree.prior_training import record_evaluations
-
-    with _progress() as progress:
-        tasks = {label: progress.add_task(f"evaluating {entry.goal} ({label})", total=episodes)
-                 for label in ("greedy", "sampled")}
-        entry, evaluations = record_evaluations(z, entry, episodes,
-                                                lambda label, n: progress.update(tasks[label], completed=n))
+def _show_evaluations(goal: str, evaluations: dict) -> None:
     for label, result in evaluations.items():
-        console.print(f"{entry.goal}: success {result.success_rate:.2f} over {episodes} episodes ({label}), "
+        console.print(f"{goal}: success {result.success_rate:.2f} over {result.episodes} episodes ({label}), "
                       f"mean length {result.mean_length:.1f}")
 
 
@@ -254,7 +225,7 @@ def similarity(
 ) -> None:
     """Cosine similarities between goal words, as the paper's Figure 1."""
     with clean_errors():
-        from sb3_disagree.language import normalise_goal
+        from sb3_disagree.priors.language import normalise_goal
 
         emb = load_embedding(embedding)
         labels = [normalise_goal(w) for w in words]

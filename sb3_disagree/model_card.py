@@ -32,7 +32,7 @@ def model_card(config: dict[str, Any], algorithm: str, evaluations: Optional[dic
     for label, result in (evaluations or {}).items():
         metrics += [_metric(f"success_rate ({label})", result.success_rate, "success_rate"),
                     _metric(f"mean_reward ({label})", result.mean_return, "mean_reward")]
-    priors = [{"goal": p, "similarity": round(float(s), 4)}
+    priors = [{"goal": p, "similarity": None if s is None else round(float(s), 4)}
               for p, s in zip(config.get("chosen_priors") or [], config.get("similarities") or [])]
     header = {
         "library_name": "stable-baselines3",

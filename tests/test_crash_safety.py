@@ -164,9 +164,11 @@ def test_the_overlapped_trainers_optimizer_state_is_copied_not_shared():
     model.learn(200)
     import copy
 
+    from sb3_disagree.acer.overlap import copy_learner
+
     learner = copy.deepcopy(model.policy)
     learner.optimizer.load_state_dict(model.policy.optimizer.state_dict())
-    model._sync_policy(learner)
+    copy_learner(learner, model.policy)
     acting = [s for s in model.policy.optimizer.state.values()]
     theirs = [s for s in learner.optimizer.state.values()]
     assert acting and all(a[k] is not b[k] for a, b in zip(acting, theirs) for k in a if isinstance(a[k], th.Tensor))
@@ -179,7 +181,7 @@ def test_the_overlapped_trainers_optimizer_state_is_copied_not_shared():
 
 
 def test_a_trust_list_outside_the_zoo_refuses_what_is_not_on_it(tmp_path, monkeypatch):
-    from sb3_disagree.zoo import Zoo, ZooError
+    from sb3_disagree.priors.zoo import Zoo, ZooError
 
     zoo = tmp_path / "zoo"
     ACER("MlpPolicy", make_vec_env(STATE_ID, n_envs=1, env_kwargs=dict(goal="bed"))).save(tmp_path / "m.zip")
@@ -264,7 +266,7 @@ def test_after_load_the_behaviours_first_infos_describe_the_reset_observations(t
 
 
 def test_a_stale_temporary_folder_in_the_zoo_trips_nothing(tmp_path):
-    from sb3_disagree.zoo import Zoo
+    from sb3_disagree.priors.zoo import Zoo
 
     zoo = tmp_path / "zoo"
     ACER("MlpPolicy", make_vec_env(STATE_ID, n_envs=1, env_kwargs=dict(goal="bed"))).save(tmp_path / "m.zip")

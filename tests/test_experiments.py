@@ -3,6 +3,7 @@
 import json
 
 import numpy as np
+import pandas as pd
 import pytest
 import yaml
 from typer.testing import CliRunner
@@ -49,6 +50,17 @@ def test_run_report_and_skip_finished(zoo, tmp_path):
     # Written atomically, yet readable by others (a temporary file's private mode is not kept).
     assert all(p.stat().st_mode & 0o777 == 0o644 for p in out.glob("*/seed-0/result.json"))
     assert not list(out.glob("*/seed-0/.result.json.*"))
+    # Each run keeps the few logged columns the report reads in curves.csv, the same values as progress.csv's.
+    from sb3_disagree.experiments.curves import CURVE_KEYS, progress_curve
+
+    run_dir = out / "disagreement" / "seed-0"
+    curves = pd.read_csv(run_dir / "curves.csv")
+    assert set(curves.columns) <= set(CURVE_KEYS) and "prior/usage" in curves
+    grid = np.linspace(10, 320, 20)
+    from_curves = progress_curve(run_dir, "prior/usage", grid)
+    (run_dir / "curves.csv").rename(run_dir / "curves.bak")
+    np.testing.assert_array_equal(from_curves, progress_curve(run_dir, "prior/usage", grid))
+    (run_dir / "curves.bak").rename(run_dir / "curves.csv")
     # A huge beta follows the priors whenever the branch is entered; scratch never does.
     usage = {c: yaml.safe_load((out / c / "seed-0" / "config.yaml").read_text()) for c in ("beta-big", "scratch")}
     assert usage["beta-big"]["beta"] == 100.0 and usage["scratch"]["chosen_priors"] == []
@@ -58,11 +70,29 @@ def test_run_report_and_skip_finished(zoo, tmp_path):
     assert report.exit_code == 0, report.output
     assert (out / "tiny.png").stat().st_size > 0 and (tmp_path / "f.png").exists()
     text = (out / "report.md").read_text()
-    assert "| scratch | 1 |" in text and "success at 0.32k" in text
+    assert "| scratch | 1 |" in text and "success at 0.32k" in text and "](tiny.png)" in text
+    # Into a page's named block: written once, replaced on the next write, the rest of the page kept.
+    page = tmp_path / "page.md"
+    page.write_text("# Page\n\nkept\n")
+    for _ in range(2):
+        written = runner.invoke(app, ["experiment", "report", str(path), "--out", str(out), "--figure",
+                                      str(tmp_path / "f.png"), "--section", str(page), "--note", "nothing else ran"])
+        assert written.exit_code == 0, written.output
+    text = page.read_text()
+    assert text.count("<!-- tiny:start -->") == 1 and text.startswith("# Page\n\nkept\n")
+    assert "| scratch | 1 |" in text and "](f.png)" in text and "nothing else ran" in text
     # The report can be restricted to seeds, but only to the experiment's own.
     assert runner.invoke(app, ["experiment", "report", str(path), "--out", str(out), "--seeds", "0"]).exit_code == 0
     report = runner.invoke(app, ["experiment", "report", str(path), "--out", str(out), "--seeds", "1"])
     assert report.exit_code == 2 and "not among" in report.output
+
+
+def test_runs_go_under_runs_experiments_by_default(zoo, tmp_path, monkeypatch):
+    path = _grid(tmp_path, zoo, seeds=(0,))
+    monkeypatch.chdir(tmp_path)
+    result = runner.invoke(app, ["experiment", "run", str(path), "--jobs", "1", "--cells", "scratch"])
+    assert result.exit_code == 0, result.output
+    assert (tmp_path / "runs" / "experiments" / "tiny" / "scratch" / "seed-0" / "result.json").exists()
 
 
 def test_summary_numbers_match_the_runs(zoo, tmp_path):

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 from gensim.models import KeyedVectors
 
-from sb3_disagree.language import (NotEnoughPriorsError, UnknownWordError, detect_format, load_embedding,
+from sb3_disagree.priors.language import (NotEnoughPriorsError, UnknownWordError, detect_format, load_embedding,
                                    normalise_goal, select_priors)
 
 LABELS = ["shower", "bathtub", "toilet", "bed", "wardrobe", "nightstand", "stove", "toaster", "microwave", "table"]
@@ -124,7 +124,7 @@ def test_normalise_goal():
 
 
 def test_a_zero_vector_is_refused_rather_than_ranked_at_nan():
-    from sb3_disagree.language import KeyedVectorsEmbedding, rank_by_similarity
+    from sb3_disagree.priors.language import KeyedVectorsEmbedding, rank_by_similarity
 
     kv = KeyedVectors(vector_size=3)
     kv.add_vectors(["bathtub", "shower", "toilet"], np.array([[1, 0, 0], [0, 0, 0], [0, 1, 0]], dtype=np.float32))

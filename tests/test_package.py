@@ -61,7 +61,7 @@ def test_the_wheel_works_alone_from_another_folder(tmp_path):
         assert result.returncode == 0, (args, result.stdout[-2000:], result.stderr[-2000:])
         return result.stdout
 
-    where = run(str(python), "-c", "import sb3_disagree, sb3_disagree.zoo as z; print(sb3_disagree.__file__, z.DEFAULT_ZOO)")
+    where = run(str(python), "-c", "import sb3_disagree, sb3_disagree.priors.zoo as z; print(sb3_disagree.__file__, z.DEFAULT_ZOO)")
     assert str(repo) not in where and str(venv) in where
     assert "chosen" in run(dopt, "priors", "list", "--goal", "bathtub")
     assert "fig3-bathtub" in run(dopt, "experiment", "list")

@@ -259,7 +259,7 @@ def test_a_model_card_beside_the_model_and_priors_add_reads_it(zoo, tmp_path):
     result = runner.invoke(app, ["priors", "add", str(run / "model.zip"), "--env", STATE_ID, "--zoo", str(other),
                                  "--episodes", "0"])
     assert result.exit_code == 0, result.output
-    from sb3_disagree.zoo import Zoo
+    from sb3_disagree.priors.zoo import Zoo
 
     card = Zoo(other).get("bathtub", STATE_ID).card
     assert card.training["model_card"]["mode"] == "disagreement"

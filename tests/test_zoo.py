@@ -11,7 +11,7 @@ from typer.testing import CliRunner
 import sb3_disagree.envs  # noqa: F401
 from sb3_disagree import ACER
 from sb3_disagree.cli.app import app
-from sb3_disagree.zoo import Zoo, ZooError, identify_algorithm
+from sb3_disagree.priors.zoo import Zoo, ZooError, identify_algorithm
 
 STATE_ID = "sb3_disagree/ApartmentState-v0"
 LABELS = ["shower", "bathtub", "toilet", "bed", "wardrobe", "nightstand"]
@@ -178,7 +178,7 @@ def test_dagger_keeps_the_best_validated_round(monkeypatch):
     import numpy as np
     import torch as th
 
-    from sb3_disagree import prior_training
+    from sb3_disagree.priors import make as prior_training
 
     scores = iter([0.2, 0.9, 0.4])  # round 2 is the best
     snapshots = []

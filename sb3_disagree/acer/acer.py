@@ -1,11 +1,9 @@
 """ACER: Sample Efficient Actor-Critic with Experience Replay (Wang et al. 2016), discrete actions."""
 
 import contextlib
-import copy
 import io
 import pathlib
-from concurrent.futures import Future, ThreadPoolExecutor
-from typing import Any, Callable, ClassVar, Iterator, Optional, TypeVar, Union
+from typing import Any, Callable, ClassVar, Optional, TypeVar, Union
 
 import numpy as np
 import torch as th
@@ -22,6 +20,7 @@ from stable_baselines3.common.vec_env import VecEnv
 from sb3_disagree.acer.buffers import Segment, SegmentReplayBuffer
 from sb3_disagree.acer.memory import push_frames
 from sb3_disagree.acer.objectives import EPS, distillation_loss, policy_terms, retrace_targets, trust_region_project
+from sb3_disagree.acer.overlap import overlapped_updates
 from sb3_disagree.acer.policies import ACERPolicy, CnnPolicy, MlpPolicy
 from sb3_disagree.behaviour import BehaviourPolicy, BehaviourStep, OnPolicyBehaviour
 
@@ -446,12 +445,6 @@ class ACER(BaseAlgorithm):
             self.logger.record(f"train/{key}", value)
         self.logger.record("train/n_updates", self._n_updates, exclude="tensorboard")
 
-    def _sync_policy(self, learner: ACERPolicy) -> None:
-        """Copy the learner (both networks and the optimizer state) into ``self.policy``. The optimizer's state is
-        deep-copied: ``load_state_dict`` would share its tensors, which the learner keeps updating in place."""
-        self.policy.load_state_dict(learner.state_dict())
-        self.policy.optimizer.load_state_dict(copy.deepcopy(learner.optimizer.state_dict()))
-
     def learn(
         self: SelfACER,
         total_timesteps: int,
@@ -501,59 +494,10 @@ class ACER(BaseAlgorithm):
         callback.on_training_end()
         return self
 
-    @contextlib.contextmanager
-    def _segment_trainer(self) -> Iterator[Callable[[Segment], None]]:
-        """
-        What learns from each collected segment: :meth:`train`, or with ``overlap`` a function that does the
-        on-policy update, copies the learner into ``self.policy`` and hands the replay updates to a second
-        thread, where they run while the next segment is collected. Leaving the context (also on an
-        interruption) waits for the last replay updates: what was collected is learned.
-        """
-        if not self.overlap:
-            yield self.train
-            return
-        learner = copy.deepcopy(self.policy)
-        # The replay draws get their own generators (counts here, segments in the worker): the rollouts in this
-        # thread may draw from the global one.
-        seeds = np.random.randint(2**31, size=2)
-        counts, samples = np.random.default_rng(seeds[0]), np.random.default_rng(seeds[1])
-        cap = int(np.ceil(self.replay_ratio)) + 1
-        pending: list[Future] = []
-        backlog = 0
-
-        def finish_replays() -> None:
-            if pending:
-                self.logger.record("train/replay_updates", pending[0].result())  # still pending if interrupted
-                pending.clear()
-
-        def hand_over(segment: Segment) -> None:
-            nonlocal backlog
-            finish_replays()
-            self._update_learning_rate(learner.optimizer)
-            th.set_num_threads(threads)  # the other thread is idle here
-            self._record_train(self._on_policy_update(segment, learner))
-            th.set_num_threads(half)
-            self._sync_policy(learner)
-            # At most `cap` replay updates per segment, the rest carried to the next: a large Poisson draw
-            # would otherwise keep the rollouts waiting while a small one leaves the worker idle.
-            backlog += self._replay_count(counts)
-            n_replay = min(backlog, cap)
-            backlog -= n_replay
-            pending.append(replays.submit(self._replay, learner, n_replay, samples))
-
-        # While both threads work they split torch's intra-op threads (one each on two cores: measured faster
-        # than two each).
-        threads = th.get_num_threads()
-        half = max(1, threads // 2)
-        th.set_num_threads(half)
-        with ThreadPoolExecutor(1, "acer-replay", initializer=th.set_num_threads, initargs=(half,)) as replays:
-            try:
-                yield hand_over
-            finally:
-                finish_replays()
-                th.set_num_threads(threads)
-                self._replay(learner, backlog, samples)  # what was earned is learned
-                self._sync_policy(learner)
+    def _segment_trainer(self) -> contextlib.AbstractContextManager[Callable[[Segment], None]]:
+        """What learns from each collected segment: :meth:`train`, or with ``overlap`` the overlapped trainer
+        (:func:`sb3_disagree.acer.overlap.overlapped_updates`)."""
+        return overlapped_updates(self) if self.overlap else contextlib.nullcontext(self.train)
 
     def _record_tags(self) -> None:
         if self.last_rollout_tags is None:

@@ -55,14 +55,31 @@ def check_monitor_coverage(run_dir: Path, steps: int, n_envs: int, max_episode_s
                          "its experiment (finished runs are skipped)")
 
 
+# The logged values an experiment's pages read back, kept per run in ``curves.csv`` (a few columns of
+# ``progress.csv``, whose other columns stay in the run folder and out of the repository).
+CURVE_KEYS = ("time/total_timesteps", "rollout/success_rate", "rollout/ep_len_mean", "rollout/ep_rew_mean",
+              "prior/usage", "prior/entropy", "prior/disagreement", "train/entropy_loss", "train/ent_coef",
+              "eval/success_rate", "eval/success_rate_greedy", "eval/mean_ep_length", "jsrl/horizon")
+CURVES = "curves.csv"
+
+
+def write_curves(run_dir: Path) -> Path:
+    """Write a run's ``curves.csv``: the ``CURVE_KEYS`` columns of its ``progress.csv``, the rows that hold one."""
+    df = pd.read_csv(run_dir / "progress.csv")
+    keys = [k for k in CURVE_KEYS if k in df]
+    df[keys].dropna(how="all", subset=keys[1:]).to_csv(run_dir / CURVES, index=False)
+    return run_dir / CURVES
+
+
 def progress_curve(run_dir: Path, key: str, grid: np.ndarray, smooth: int = 1) -> np.ndarray:
     """
-    A logged value (e.g. ``prior/usage``) against env steps, from ``progress.csv``, held between dumps.
+    A logged value (e.g. ``prior/usage``) against env steps, from ``curves.csv`` (or ``progress.csv`` where the
+    run has none), held between dumps.
 
     :param smooth: Moving average over this many dumps (each dump holds one rollout's value)
     """
     try:
-        df = pd.read_csv(run_dir / "progress.csv")
+        df = pd.read_csv(run_dir / CURVES if (run_dir / CURVES).exists() else run_dir / "progress.csv")
     except (FileNotFoundError, pd.errors.EmptyDataError):  # a run shorter than one log interval
         return np.full(len(grid), np.nan)
     if key not in df or "time/total_timesteps" not in df:

@@ -244,19 +244,16 @@ def plot(experiment: Experiment, grid: np.ndarray, summaries: list[CellSummary],
 
 def _draw_path(ax, experiment: Experiment, run_dir: Path, title: str) -> None:
     """The last complete recorded episode of a run, on the apartment's map, green where priors led."""
-    from sb3_disagree.envs.apartment import ApartmentEnv
-    from sb3_disagree.envs.topdown import draw_trajectory
+    from sb3_disagree.run.trajectories import draw_episode, read_episodes
 
-    lines = (run_dir / "trajectories.jsonl").read_text().splitlines() if (run_dir / "trajectories.jsonl").exists() else []
-    records = [json.loads(line) for line in lines]
+    records = read_episodes(run_dir)
     complete = [r for r in records if r["complete"]] or records
     ax.axis("off")
     if not complete or not experiment.env_id.startswith("sb3_disagree/Apartment"):
         ax.set_title(f"{title}: no recorded episode")
         return
     record = complete[-1]
-    layout = ApartmentEnv(goal=experiment.goal, obs="state").layout
-    ax.imshow(draw_trajectory(layout, record["positions"], record["tags"][1:], goal=experiment.goal))
+    ax.imshow(draw_episode(record, experiment.env_id, experiment.goal))
     tags = record["tags"][1:]
     ax.set_title(f"{title}: episode at {record['timesteps'] // 1000}k steps, "
                  f"{tags.count('prior')}/{len(tags)} on priors", fontsize=9)

@@ -19,6 +19,7 @@ from typing import Any, Optional
 
 import yaml
 
+from sb3_disagree.experiments.curves import write_curves
 from sb3_disagree.experiments.spec import RESULT, Experiment, Run
 from sb3_disagree.files import write_atomic
 
@@ -79,6 +80,7 @@ def train_and_evaluate(run: Run, folder: Path, source: Optional[Path] = None,
     if not finished:
         raise KeyboardInterrupt
     seconds = time.perf_counter() - start
+    write_curves(folder)
     # The new policy alone from env seeds the run never trained on, greedy (SB3's default) and sampled, on its card.
     evaluations = write_card(folder, model, run.final_episodes, f"dopt experiment run {run.cell} (seed {run.seed})")
     result = {"cell": run.cell, "seed": run.seed, "steps": int(model.num_timesteps), "seconds": round(seconds, 1),

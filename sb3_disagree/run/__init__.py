@@ -1,6 +1,6 @@
 """
 One run of the method or a peer, in parts whose names say what they hold: ``config`` (RunConfig and the
-modes' defaults), ``priors`` (choosing them), ``models`` (what trains), ``envs`` (the VecEnv factory),
+modes' defaults), ``models`` (what trains), ``envs`` (the VecEnv factory),
 ``train`` (the loop and the run folder), ``evaluation`` (the policy alone, the model card), ``logs`` and
 ``trajectories``.
 """
@@ -8,14 +8,13 @@ modes' defaults), ``priors`` (choosing them), ``models`` (what trains), ``envs``
 from sb3_disagree.defaults import DEFAULT_ENV, EVAL_SEED_OFFSET, FINAL_EVAL_SEED_OFFSET
 from sb3_disagree.run.config import ACER_KWARGS, KICKSTART, PPO_KWARGS, RunConfig, check_navigation_env
 from sb3_disagree.run.envs import build_env
-from sb3_disagree.run.evaluation import EvaluateAlone, evaluate_alone, evaluate_both, write_card
+from sb3_disagree.run.evaluation import EvaluateAlone, evaluate_alone, evaluate_both, evaluate_run, write_card
 from sb3_disagree.run.logs import AppendingCSVOutputFormat, run_logger
 from sb3_disagree.run.models import algorithm_of, new_model
-from sb3_disagree.run.priors import choose_priors, guide_horizon
-from sb3_disagree.run.train import train
-from sb3_disagree.run.trajectories import RecordTrajectories
+from sb3_disagree.run.train import check_resume, train
+from sb3_disagree.run.trajectories import RecordTrajectories, draw_episode, read_episodes
 
 __all__ = ["ACER_KWARGS", "DEFAULT_ENV", "EVAL_SEED_OFFSET", "FINAL_EVAL_SEED_OFFSET", "KICKSTART", "PPO_KWARGS",
            "AppendingCSVOutputFormat", "EvaluateAlone", "RecordTrajectories", "RunConfig", "algorithm_of", "build_env",
-           "check_navigation_env", "choose_priors", "evaluate_alone", "evaluate_both", "guide_horizon", "new_model", "run_logger",
+           "check_navigation_env", "check_resume", "draw_episode", "evaluate_alone", "evaluate_both", "evaluate_run", "new_model", "read_episodes", "run_logger",
            "train", "write_card"]

@@ -16,7 +16,7 @@ PPO_KWARGS: dict[str, Any] = dict(n_steps=128, n_epochs=4, batch_size=256, learn
                                   ent_coef=0.01, vf_coef=0.5)
 # ACER on the apartment: images through NatureCNN; a buffer of 50k frames is 0.7 GB of uint8. Rewards scaled
 # by 0.1 (Q in units of the +10 goal / 10): at scale 1 the policy's entropy collapsed by 20k steps and the
-# new policy alone fell back to ~0 success; at 0.1 it trains stably (docs/results.md, "Choosing ACER's scale").
+# new policy alone fell back to ~0 success; at 0.1 it trains stably (docs/history.md, "Choosing ACER's scale").
 ACER_KWARGS: dict[str, Any] = dict(n_steps=20, buffer_size=50_000, replay_start=2_000, replay_ratio=4, ent_coef=0.01,
                                    learning_rate=7e-4, reward_scale=0.1)
 
@@ -49,9 +49,9 @@ class RunConfig:
     :param eval_episodes: Episodes per evaluation
     :param vec_env: "dummy" (envs stepped in this process) or "subproc" (one process per env: their
         rendering runs in parallel on several cores)
-    :param overlap: ACER's replay updates in a second thread while the next segment is collected (faster
-        on two cores; see ``ACER``'s ``overlap``). ``dopt train`` turns it on; off here, so that the
-        experiments keep the sequential loop their figures were made with unless a cell asks for it
+    :param overlap: ACER's replay updates in a second thread while the next segment is collected (faster on two
+        cores). Off in the library and the experiments (the sequential loop their figures were made with); on in
+        dopt train
     :param frame_stack: The new policy sees its last this many observations (its memory; 1: the current one);
         the priors keep their single observation
     :param jsrl_horizon: Mode "jsrl": the guide's horizon at the start, in steps; 0 for the priors' mean
@@ -145,9 +145,9 @@ def check_navigation_env(env_id: str) -> None:
 
     from sb3_disagree.envs.navigation import NavigationEnv
 
-    if env_id not in gym.registry:
-        ours = ", ".join(k for k in gym.registry if k.startswith("sb3_disagree/"))
-        raise ValueError(f"unknown environment {env_id!r}; this package registers {ours}")
+    from sb3_disagree.envs.vec import check_env_id
+
+    check_env_id(env_id)
     entry = gym.spec(env_id).entry_point
     cls = gym.envs.registration.load_env_creator(entry) if isinstance(entry, str) else entry
     if not (isinstance(cls, type) and issubclass(cls, NavigationEnv)):

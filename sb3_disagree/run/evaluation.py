@@ -1,5 +1,6 @@
 """The new policy alone: along a run (greedy and sampled), after it, and on its model card."""
 
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any, Optional
 
@@ -8,8 +9,12 @@ import yaml
 from stable_baselines3.common.callbacks import BaseCallback
 
 from sb3_disagree.defaults import EVAL_SEED_OFFSET, FINAL_EVAL_SEED_OFFSET
+from sb3_disagree.envs.vec import make_vec
+from sb3_disagree.evaluation import evaluate
+from sb3_disagree.priors.zoo import space_fits, space_to_dict
 from sb3_disagree.run.config import RunConfig
 from sb3_disagree.run.envs import build_env
+from sb3_disagree.run.models import algorithm_of
 
 class EvaluateAlone(BaseCallback):
     """
@@ -41,7 +46,6 @@ class EvaluateAlone(BaseCallback):
     def _on_step(self) -> bool:
         if self.n_calls % self.every:
             return True
-        from sb3_disagree.prior_training import evaluate
 
         if self.env is None:
             self.env = build_env(self.config, None, n_envs=min(self.config.n_envs, 4),
@@ -90,7 +94,7 @@ def evaluate_both(model: Any, config: dict[str, Any], episodes: int, seed: Optio
     :param episodes: Episodes each way
     :param seed: Env seed of the first env; default the run's seed + ``FINAL_EVAL_SEED_OFFSET`` (never trained on)
     :param labels: Which of "greedy" and "sampled"
-    :return: The :class:`~sb3_disagree.prior_training.Evaluation` by label
+    :return: The :class:`~sb3_disagree.evaluation.Evaluation` by label
     """
     first = config.get("seed", 0) + FINAL_EVAL_SEED_OFFSET if seed is None else seed
     return {label: evaluate_alone(model, config, episodes, label == "greedy", first) for label in labels}
@@ -105,12 +109,9 @@ def evaluate_alone(model: Any, config: dict[str, Any], episodes: int, determinis
     :param episodes: Number of episodes
     :param deterministic: Greedy actions if True, sampled otherwise
     :param seed: Seed of the first env
-    :return: The :class:`~sb3_disagree.prior_training.Evaluation`
+    :return: The :class:`~sb3_disagree.evaluation.Evaluation`
     """
-    from sb3_disagree.prior_training import evaluate, make_env
-    from sb3_disagree.zoo import space_fits, space_to_dict
-
-    env = make_env(config["env_id"], config["goal"], config.get("env_kwargs") or {}, n_envs=4, seed=seed)
+    env = make_vec(config["env_id"], config["goal"], config.get("env_kwargs") or {}, n_envs=4, seed=seed)
     try:
         for kind in ("observation", "action"):
             theirs = getattr(model, f"{kind}_space")
@@ -120,3 +121,31 @@ def evaluate_alone(model: Any, config: dict[str, Any], episodes: int, determinis
         return evaluate(model, env, episodes, deterministic=deterministic)
     finally:
         env.close()
+
+
+def evaluate_run(path: Path, episodes: int = 100, seed: Optional[int] = None,
+                 labels: Sequence[str] = ("greedy", "sampled")) -> tuple[dict[str, Any], dict[str, Any]]:
+    """
+    A trained run's policy alone, loaded from its folder (or its ``model.zip``) as a user would load it.
+
+    :param path: A run folder, or a ``model.zip`` with the run's ``config.yaml`` beside it
+    :param episodes: Episodes each way
+    :param seed: Env seed of the first env (default: the run's seed + ``FINAL_EVAL_SEED_OFFSET``)
+    :param labels: "greedy" and/or "sampled"
+    :return: The run's configuration and the :class:`~sb3_disagree.evaluation.Evaluation` by label
+    """
+    path = Path(path)
+    run_dir = path if path.is_dir() else path.parent
+    model_path = path / "model.zip" if path.is_dir() else path
+    if not model_path.exists():
+        raise FileNotFoundError(f"no model at {model_path}")
+    cfg_path = run_dir / "config.yaml"
+    if not cfg_path.exists():
+        raise FileNotFoundError(f"{cfg_path} is missing: it names the environment and goal to evaluate in")
+    config = yaml.safe_load(cfg_path.read_text())
+    algorithm = algorithm_of(config.get("mode", "disagreement"))
+    try:
+        model = algorithm.load(model_path, device="cpu")
+    except Exception as exc:  # a damaged file, or another algorithm's
+        raise ValueError(f"{model_path} could not be loaded as {algorithm.__name__}: {exc}") from None
+    return config, evaluate_both(model, config, episodes, seed, tuple(labels))

@@ -13,7 +13,7 @@ import pickle
 import shutil
 import zipfile
 from collections.abc import Callable
-from dataclasses import asdict
+from dataclasses import asdict, fields
 from pathlib import Path
 from typing import Optional
 
@@ -23,13 +23,13 @@ from stable_baselines3.common.callbacks import BaseCallback, CallbackList
 from sb3_disagree.acer import ACER
 from sb3_disagree.checkpoints import Checkpoint, latest_checkpoint, save_checkpoint, sigterm_as_interrupt, truncate_logs
 from sb3_disagree.files import write_atomic
-from sb3_disagree.options import make_options
+from sb3_disagree.options import PriorSet, make_options
+from sb3_disagree.priors.select import choose_priors, guide_horizon
 from sb3_disagree.run.config import RunConfig
 from sb3_disagree.run.envs import build_env
 from sb3_disagree.run.evaluation import EvaluateAlone
 from sb3_disagree.run.logs import run_logger
 from sb3_disagree.run.models import algorithm_of, new_model
-from sb3_disagree.run.priors import choose_priors, guide_horizon
 from sb3_disagree.run.trajectories import RecordTrajectories
 
 def train(config: RunConfig, out: Path = Path("runs"), resume: Optional[Path] = None,
@@ -83,10 +83,13 @@ def train(config: RunConfig, out: Path = Path("runs"), resume: Optional[Path] = 
         env = build_env(config, run_dir, append=resume is not None)
         behaviour, prior_names, sims, priors = None, [], [], None
         if config.mode not in ("scratch", "ppo"):
-            prior_names, sims, priors = choose_priors(config, env)
+            prior_names, sims, models = choose_priors(config.goal, config.env_id, env, config.priors, config.zoo,
+                                                      config.embedding)
+            priors = PriorSet(models)
             if on_priors:
                 on_priors(prior_names, sims)
-            horizon = config.jsrl_horizon or guide_horizon(config, prior_names) if config.mode == "jsrl" else 0
+            horizon = (config.jsrl_horizon or guide_horizon(config.env_id, prior_names, config.zoo)
+                       if config.mode == "jsrl" else 0)
             behaviour = make_options(config.mode, priors, config.alpha, config.beta, config.entropy_offset,
                                      seed=config.seed, horizon=horizon)
         saved_config = dict(asdict(config), chosen_priors=prior_names, similarities=sims)
@@ -126,6 +129,32 @@ def train(config: RunConfig, out: Path = Path("runs"), resume: Optional[Path] = 
     env.close()
     return run_dir, model, finished
 
+
+
+def check_resume(config: RunConfig, resume: Path, force: bool = False) -> None:
+    """
+    A resumed run keeps its saved settings: a ValueError if ``config`` changes one of them (any field not at its
+    default besides the goal, the budget and the loop), rather than dropping it silently.
+
+    :param config: The settings asked for
+    :param resume: The run folder to continue
+    :param force: Whether replacing the run was asked for too (a contradiction)
+    """
+    if force:
+        raise ValueError("--force replaces a run and --resume continues one: choose one")
+    saved_path = Path(resume) / "config.yaml"
+    if not saved_path.exists():
+        raise FileNotFoundError(f"{resume} is not a run folder with config.yaml and model.zip to resume")
+    saved = yaml.safe_load(saved_path.read_text())
+    if saved.get("goal") != config.goal:
+        raise ValueError(f"{resume} trains the goal {saved.get('goal')!r}, not {config.goal!r}")
+    defaults = RunConfig(goal=config.goal)
+    # The loop (overlap) is the saved one whatever is asked; steps is the new budget.
+    given = [f.name for f in fields(RunConfig) if f.name not in ("goal", "steps", "overlap", "acer_kwargs")
+             and getattr(config, f.name) != getattr(defaults, f.name)]
+    if given:
+        flags = ", ".join({"env_id": "--env"}.get(name, "--" + name.replace("_", "-")) for name in given)
+        raise ValueError(f"--resume continues {resume} with its saved settings; drop {flags}")
 
 def _resumed_model(config: RunConfig, run_dir: Path, env, behaviour, checkpoint):
     """The model a resumed run continues: from its newest complete checkpoint (with the replay buffer it kept),

@@ -2,8 +2,11 @@
 
 import json
 from pathlib import Path
+from typing import Any, Optional
 
+import numpy as np
 from stable_baselines3.common.callbacks import BaseCallback
+
 
 class RecordTrajectories(BaseCallback):
     """Write each episode of env 0 as a JSON line: positions after each step, their tags, success."""
@@ -41,3 +44,29 @@ class RecordTrajectories(BaseCallback):
             f.write(json.dumps(record) + "\n")
 
 
+
+
+def read_episodes(run_dir: Path) -> list[dict[str, Any]]:
+    """The recorded episodes of a run (``trajectories.jsonl``), oldest first; [] if none were recorded."""
+    path = Path(run_dir) / "trajectories.jsonl"
+    return [json.loads(line) for line in path.read_text().splitlines()] if path.exists() else []
+
+
+def draw_episode(record: dict[str, Any], env_id: str, goal: str, out: Optional[Path] = None) -> np.ndarray:
+    """
+    A recorded episode on the map of its env, each step coloured by whether it followed a prior.
+
+    :param record: One line of ``trajectories.jsonl``
+    :param env_id: The run's env (one with a ``layout``: the apartment)
+    :param goal: The run's goal (marked on the map)
+    :param out: Also write the picture here (PNG)
+    :return: The picture (H, W, 3)
+    """
+    from sb3_disagree.envs.topdown import draw_trajectory
+    from sb3_disagree.envs.vec import make_task
+
+    layout = getattr(make_task(env_id, goal).unwrapped, "layout", None)
+    if layout is None:
+        raise ValueError(f"{env_id} has no map to draw episodes on")
+    # positions[i] is where step i ended; the segment from i to i + 1 is step i + 1's action.
+    return draw_trajectory(layout, record["positions"], record["tags"][1:], goal=goal, out=out)

@@ -1,0 +1,133 @@
+"""
+An experiment's write-up: the figure and the markdown (commands, seeds, machine, table, per-seed numbers,
+the policy alone along the way) as ``report.md`` beside its runs, and, when asked, as a named section of a
+documentation page, so that a page's numbers are always the ones its runs give.
+"""
+
+import os
+import platform
+from pathlib import Path
+from typing import Optional
+
+import yaml
+
+from sb3_disagree.experiments.report import (alone_markdown, plot, ratio_markdown, seeds_markdown, summarize,
+                                             table_markdown)
+from sb3_disagree.experiments.spec import Experiment
+
+
+def write_section(page: Path, name: str, title: str, body: str) -> None:
+    """
+    Replace the block between ``<!-- name:start -->`` and ``<!-- name:end -->`` in a markdown page, or append it
+    under ``## title`` when the page does not have it yet; the rest of the page is left as it is.
+    """
+    page = Path(page)
+    start, end = f"<!-- {name}:start -->", f"<!-- {name}:end -->"
+    block = f"{start}\n{body.strip()}\n{end}"
+    text = page.read_text() if page.exists() else f"# {page.stem.capitalize()}\n"
+    if start in text:
+        head, rest = text.split(start, 1)
+        text = head + block + rest.split(end, 1)[1]
+    else:
+        text = text.rstrip() + f"\n\n## {title}\n\n{block}\n"
+    page.write_text(text)
+
+
+def write_report(experiment: Experiment, root: Path, figure: Optional[Path] = None, note: str = "",
+                 section: Optional[Path] = None, seeds: Optional[list[int]] = None) -> str:
+    """
+    Write an experiment's figure and ``report.md`` into its results folder, and optionally its section of a page.
+
+    :param experiment: The experiment (restricted to the seeds to report, if any)
+    :param root: Its results folder
+    :param figure: Also write the figure here (the page links this one)
+    :param note: What else ran on the machine meanwhile, said beside the machine
+    :param section: A markdown page whose ``<!-- NAME:start/end -->`` block gets the write-up
+    :param seeds: The ``--seeds`` the report was restricted to (said in the command)
+    :return: The markdown written
+    """
+    grid, summaries = summarize(experiment, root)
+    if not summaries:
+        raise FileNotFoundError(f"no finished runs of {experiment.name} in {root}; run: dopt experiment run "
+                                f"{experiment.name} --out {root}")
+    png = root / f"{experiment.name}.png"
+    plot(experiment, grid, summaries, png, root)
+    if figure is not None:
+        figure.parent.mkdir(parents=True, exist_ok=True)
+        figure.write_bytes(png.read_bytes())
+    command = _command(experiment, root, figure, section, seeds, summaries)
+    (root / "report.md").write_text(f"# {experiment.name}\n\n" + _body(experiment, grid, summaries, png.name, note,
+                                                                    command) + "\n")
+    if section is None:
+        return (root / "report.md").read_text()
+    link = os.path.relpath(figure or png, Path(section).parent)
+    body = _body(experiment, grid, summaries, link, note, command)
+    write_section(section, experiment.name, f"{experiment.name}: {experiment.goal}", body)
+    return body
+
+
+def _command(experiment: Experiment, root: Path, figure: Optional[Path], section: Optional[Path],
+             seeds: Optional[list[int]], summaries: list) -> str:
+    ran = sorted({s for c in summaries for s in c.seeds})
+    report = (f"dopt experiment report {experiment.name} --out {root}"
+              + (f" --seeds {','.join(map(str, seeds))}" if seeds else "")
+              + (f" --figure {figure}" if figure else "") + (f" --section {section}" if section else ""))
+    return (f"`dopt experiment run {experiment.name} --jobs 2 --seeds {','.join(map(str, ran))} --out {root}` then "
+            f"`{report}`")
+
+
+def _body(experiment: Experiment, grid, summaries: list, figure_link: str, note: str, command: str) -> str:
+    name = experiment.name
+    acer = summaries[0].records[0]["config"]["acer_kwargs"]
+    continued = ""
+    if experiment.continues:
+        begun = sorted({r.get("from_steps", 0) for c in summaries for r in c.records})
+        continued = (f"Each run continues `{experiment.continues}`'s finished run of the same cell and seed (`continues:` "
+                     f"in the YAML): its first {', '.join(f'{b:,}' for b in begun)} env steps are that run's, and the "
+                     "replay buffer starts empty where it continues; env steps/s is the continuation's. ")
+    copied = [f"{c.cell} = `{experiment.cells[c.cell]['same_as']}`" for c in summaries
+              if any("copied_from" in r for r in c.records)]
+    if copied:
+        continued += (f"Runs taken from another experiment (`same_as:` in the YAML; the same configuration and seed, "
+                      f"and runs are deterministic): {', '.join(copied)}. ")
+    per_cell = {c.cell: sorted(c.seeds) for c in summaries}
+    if len({tuple(v) for v in per_cell.values()}) == 1:
+        seeds_text = f"Seeds {', '.join(map(str, next(iter(per_cell.values()))))}"
+    else:
+        seeds_text = "Seeds per cell: " + "; ".join(f"{k} {', '.join(map(str, v))}" for k, v in per_cell.items())
+    run_cfg = summaries[0].records[0]["config"]
+    alone_every = (f"{run_cfg.get('eval_episodes', 20)} episodes every {run_cfg.get('eval_every', 0) // 1000}k steps"
+                   if run_cfg.get("eval_every") else "not evaluated along the way")
+    greedy_curve = ("; dotted: the same with greedy actions, SB3's default" if any(len(c.alone_greedy) for c in summaries)
+                    else "")
+    final_how = (" with SB3's `evaluate_policy` from env seeds the run never trained on, greedy and sampled"
+                 if any(c.final_greedy_seeds for c in summaries) else "")
+    how = "two runs at a time, one torch thread each"
+    overlapped = [c.cell for c in summaries if c.records[0]["config"].get("overlap")]
+    if overlapped:
+        how += (f" (the overlapped cells, {', '.join(overlapped)}: one run at a time, two torch threads for the on-policy "
+                "update and one in each of its two threads while the replay updates overlap the rollouts)")
+    body = (f"Commands: {command} (grid: `sb3_disagree/data/experiments/{name}.yaml`). "
+            f"{seeds_text}; {experiment.steps:,} env steps per run; {platform.machine()}, "
+            f"{os.cpu_count()} cores, {how}{'; ' + note if note else ''}. ACER: "
+            f"{yaml.safe_dump(acer, default_flow_style=True, width=200).strip()}. {continued}\n\n"
+            f"![{name}]({figure_link})\n\n{table_markdown(experiment, summaries)}\n\n"
+            "Solid lines: training success (the last 50 episodes over all envs, priors included where they were "
+            "followed), mean over seeds with a 95% t-interval (none with fewer than 3 seeds); dashed: the new policy "
+            f"alone (no priors, sampled actions, {alone_every}){greedy_curve}. Table: steps to 50%/90% and success at "
+            "the budgets read from the mean training curve; AUC is the mean of that curve over the run; the new policy "
+            f"alone (final) is evaluated over {experiment.final_episodes} episodes after training{final_how}, per seed "
+            "in brackets.\n\n"
+            f"Per seed, read from each seed's own training curve (the same 50-episode window):\n\n"
+            f"{seeds_markdown(summaries)}\n")
+    alone = alone_markdown(summaries)
+    if alone is not None:
+        body += ("\nThe new policy alone along the way (each run's periodic evaluation, "
+                 f"{run_cfg.get('eval_episodes', 20)} episodes each way, mean over the seeds), greedy / sampled:\n\n"
+                 f"{alone}\n")
+    ratio = ratio_markdown(grid, summaries)
+    if ratio is not None:
+        body += ("\nSteps to 90% training success with disagreement options over those from scratch, per seed and "
+                 f"from the mean curves (a curve that never gets there counts as the run's {experiment.steps:,} "
+                 f"steps, which bounds the ratio):\n\n{ratio}\n")
+    return body

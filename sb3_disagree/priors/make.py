@@ -1,0 +1,310 @@
+"""
+Making priors: imitation of an environment's scripted expert with DAgger-style relabelling, or
+reinforcement learning (ACER, PPO), then evaluation from the environment's own start distribution.
+
+An environment offers an expert by a method ``expert_action()`` that returns the expert's action for
+its current state (the apartment does); DAgger needs nothing else.
+"""
+
+import time
+from collections.abc import Callable
+from typing import Any, Optional
+
+import numpy as np
+import torch as th
+from stable_baselines3.common.base_class import BaseAlgorithm
+from stable_baselines3.common.preprocessing import is_image_space
+from stable_baselines3.common.vec_env import VecEnv
+
+from sb3_disagree.acer import ACER
+from sb3_disagree.defaults import PRIOR_VALIDATION_SEED
+from sb3_disagree.envs.vec import make_vec
+from sb3_disagree.evaluation import Evaluation, evaluate
+
+METHODS = ("dagger", "acer", "ppo")
+# Small image networks keep a zoo of ten priors well under 60 MB.
+PRIOR_POLICY_KWARGS = {"CnnPolicy": dict(features_extractor_kwargs=dict(features_dim=128)), "MlpPolicy": {}}
+
+
+def policy_name(env: VecEnv) -> str:
+    return "CnnPolicy" if is_image_space(env.observation_space) else "MlpPolicy"
+
+
+def train_dagger(
+    env: VecEnv,
+    seed: int = 0,
+    rounds: int = 6,
+    steps_per_round: int = 3_000,
+    epochs: int = 6,
+    batch_size: int = 128,
+    learning_rate: float = 1e-3,
+    max_episode_steps: int = 200,
+    final_epochs: int = 0,
+    validation_env: Optional[VecEnv] = None,
+    validation_episodes: int = 0,
+    validation_seed: int = PRIOR_VALIDATION_SEED,
+    learner_actions: str = "sampled",
+    progress: Optional[Callable[[str], None]] = None,
+) -> tuple[ACER, dict[str, Any]]:
+    """
+    DAgger: the first round follows the expert; later rounds follow the learner with probability
+    ``1 - 0.5 ** round`` and the expert otherwise, and every visited state is labelled with the expert's
+    action; after each round the policy head is fitted to all labels so far (cross-entropy).
+
+    :param env: The VecEnv to imitate in; its envs have ``expert_action()``
+    :param seed: Seed of the policy and the rollouts
+    :param rounds: Data-collection rounds
+    :param steps_per_round: Labelled env steps per round
+    :param epochs: Passes over the aggregated data after each round
+    :param batch_size: Minibatch size
+    :param learning_rate: Adam's learning rate
+    :param max_episode_steps: Rollouts restart after this many steps (a stuck learner teaches little more)
+    :param final_epochs: Extra passes over the final aggregate with the learning rate decayed to zero
+        (the per-round fits stop short of fitting the labels; these close the gap)
+    :param validation_env: Where each round's policy is evaluated when ``validation_episodes > 0``; the
+        policy of the round with the highest success is returned (DAgger's "best policy of the sequence"),
+        rather than the last one
+    :param validation_episodes: Episodes per validation (0: return the last round's policy)
+    :param validation_seed: Env seed of every validation, so that each round meets the same starts
+    :param learner_actions: How the learner acts in the rounds it leads: "sampled", or "greedy" (its argmax, as
+        SB3's ``evaluate_policy`` acts), so that the states where a greedy policy gets stuck (walking into a
+        wall) are visited and labelled; validation then evaluates greedily too
+    :param progress: Called with a line of text after each round
+    :return: An ACER model whose policy imitates the expert, and a record of the training
+    """
+    if learner_actions not in ("sampled", "greedy"):
+        raise ValueError(f"learner_actions must be 'sampled' or 'greedy', got {learner_actions!r}")
+    greedy = learner_actions == "greedy"
+    name = policy_name(env)
+    model = ACER(name, env, seed=seed, policy_kwargs=PRIOR_POLICY_KWARGS[name])
+    env = model.get_env()  # as the policy sees it (channel-first images)
+    policy = model.policy
+    optimizer = th.optim.Adam(policy.net.parameters(), lr=learning_rate)
+    rng = np.random.default_rng(seed)
+    data_obs: list[np.ndarray] = []
+    data_act: list[np.ndarray] = []
+    obs = env.reset()
+    ep_len = np.zeros(env.num_envs, dtype=int)
+    start = time.perf_counter()
+    validation: list[float] = []
+    best: Optional[dict[str, th.Tensor]] = None
+    for r in range(rounds):
+        beta = 0.5 ** r  # probability of executing the expert's own action
+        collected = 0
+        while collected < steps_per_round:
+            labels = np.asarray(env.env_method("expert_action"), dtype=np.int64)
+            data_obs.append(obs.copy())
+            data_act.append(labels)
+            if r == 0:
+                actions = labels
+            else:
+                learner, _ = model.predict(obs, deterministic=greedy)
+                actions = np.where(rng.random(env.num_envs) < beta, labels, learner)
+            obs, _, dones, _ = env.step(actions)
+            ep_len = np.where(dones, 0, ep_len + 1)
+            if (ep_len >= max_episode_steps).any():
+                obs = env.reset()
+                ep_len[:] = 0
+            collected += env.num_envs
+        x = np.concatenate(data_obs)
+        y = np.concatenate(data_act)
+        loss, accuracy = _fit(policy, optimizer, x, y, epochs, batch_size, rng)
+        line = f"round {r + 1}/{rounds}: {len(y)} labels, loss {loss:.3f}, accuracy {accuracy:.3f}"
+        if validation_env is not None and validation_episodes > 0:
+            validation_env.seed(validation_seed)
+            validation.append(evaluate(model, validation_env, validation_episodes, deterministic=greedy).success_rate)
+            if validation[-1] >= max(validation):  # ties go to the later round, which has seen more labels
+                best = {k: v.clone() for k, v in policy.net.state_dict().items()}
+            line += f", validation success {validation[-1]:.2f}"
+        if progress:
+            progress(line)
+    record = {"method": "dagger", "steps": int(len(y)), "seed": seed, "rounds": rounds, "epochs": epochs,
+              "final_epochs": final_epochs, "learner_actions": learner_actions}
+    if validation:
+        selected = int(np.flatnonzero(np.asarray(validation) == max(validation))[-1])
+        policy.net.load_state_dict(best)
+        record.update(validation_episodes=validation_episodes, validation_seed=validation_seed,
+                      validation_success=validation, selected_round=selected + 1)
+        if progress:
+            progress(f"kept round {selected + 1} (validation success {validation[selected]:.2f})")
+    if final_epochs > 0:  # from the kept round's policy
+        schedule = th.optim.lr_scheduler.CosineAnnealingLR(optimizer, T_max=final_epochs)
+        for _ in range(final_epochs):
+            loss, accuracy = _fit(policy, optimizer, x, y, 1, batch_size, rng)
+            schedule.step()
+        if progress:
+            progress(f"final {final_epochs} epochs: loss {loss:.3f}, accuracy {accuracy:.3f}")
+    record.update(final_loss=loss, final_accuracy=accuracy)
+    # The average network starts where the imitated policy is, so that ACER fine-tuning begins consistent.
+    policy.average_net.load_state_dict(policy.net.state_dict())
+    model.num_timesteps = int(len(y))
+    record["seconds"] = round(time.perf_counter() - start, 1)
+    return model, record
+
+
+def _fit(policy, optimizer, x: np.ndarray, y: np.ndarray, epochs: int, batch_size: int,
+         rng: np.random.Generator) -> tuple[float, float]:
+    policy.set_training_mode(True)
+    device = policy.device
+    for _ in range(epochs):
+        order = rng.permutation(len(y))
+        losses, correct = [], 0
+        for i in range(0, len(y), batch_size):
+            idx = order[i:i + batch_size]
+            obs = th.as_tensor(x[idx], device=device)
+            target = th.as_tensor(y[idx], device=device)
+            logits = policy.net.logits(policy.extract_features(obs, policy.net.features_extractor))
+            loss = th.nn.functional.cross_entropy(logits, target)
+            optimizer.zero_grad()
+            loss.backward()
+            optimizer.step()
+            losses.append(loss.item())
+            correct += int((logits.argmax(-1) == target).sum())
+    policy.set_training_mode(False)
+    return float(np.mean(losses)), correct / len(y)
+
+
+def train_rl(env: VecEnv, method: str, steps: int, seed: int = 0, progress_bar: bool = False) -> tuple[BaseAlgorithm, dict]:
+    """
+    Reinforcement learning from the environment's reward.
+
+    :param env: The VecEnv
+    :param method: "acer" or "ppo"
+    :param steps: Env steps
+    :param seed: Seed
+    :param progress_bar: Show SB3's progress bar
+    """
+    name = policy_name(env)
+    start = time.perf_counter()
+    if method == "acer":
+        model: BaseAlgorithm = ACER(name, env, seed=seed, policy_kwargs=PRIOR_POLICY_KWARGS[name])
+    elif method == "ppo":
+        from stable_baselines3 import PPO
+
+        model = PPO(name, env, seed=seed, policy_kwargs=PRIOR_POLICY_KWARGS[name])
+    else:
+        raise ValueError(f"method must be one of {', '.join(METHODS)}, got {method!r}")
+    model.learn(steps, progress_bar=progress_bar)
+    return model, {"method": method, "steps": steps, "seed": seed, "seconds": round(time.perf_counter() - start, 1)}
+
+
+def evaluate_entry(zoo: Any, entry: Any, episodes: int, deterministic: bool, seed: int,
+                   progress: Optional[Callable[[int], None]] = None) -> Evaluation:
+    """
+    A zoo entry alone for some episodes on 4 envs seeded from ``seed``.
+
+    :param zoo: The :class:`~sb3_disagree.priors.zoo.Zoo`
+    :param entry: Its entry
+    :param episodes: Number of episodes
+    :param deterministic: Greedy actions if True, sampled otherwise
+    :param seed: Env seed of the first env
+    :param progress: Called with the number of finished episodes
+    """
+    venv = make_vec(entry.env_id, entry.goal, entry.card.env_kwargs if entry.card else {}, n_envs=4, seed=seed)
+    try:
+        return evaluate(zoo.load(entry, venv, device="cpu"), venv, episodes, deterministic, progress)
+    finally:
+        venv.close()
+
+
+def make_prior(zoo: Any, goal: str, env_id: str, method: str = "dagger", steps: int = 200_000, n_envs: int = 4,
+               seed: int = 0, episodes: int = 100, replace: bool = False, command: str = "",
+               progress: Optional[Callable[[str], None]] = None, **dagger_kwargs: Any) -> tuple[Any, dict[str, Any]]:
+    """
+    Train a prior, add it to the zoo, and record its evaluation alone (greedy and sampled) on its card: what
+    ``dopt priors train`` does, in one call.
+
+    :param zoo: The :class:`~sb3_disagree.priors.zoo.Zoo` to add it to
+    :param goal: The goal it learns to reach
+    :param env_id: The environment
+    :param method: "dagger" (imitate the env's expert), "acer" or "ppo"
+    :param steps: Env steps for acer/ppo
+    :param n_envs: Parallel envs
+    :param seed: Seed of the policy and the rollouts
+    :param episodes: Evaluation episodes each way for the card (0: none)
+    :param replace: Replace an existing prior for this goal
+    :param command: The command that made it, for the card
+    :param progress: Called with a line of text as training goes (DAgger's rounds)
+    :param dagger_kwargs: :func:`train_dagger`'s own settings (rounds, epochs, validation_episodes, ...)
+    :return: The zoo entry (as read back) and the evaluations by label ("greedy", "sampled")
+    """
+    import tempfile
+    from pathlib import Path
+
+    from sb3_disagree.defaults import PRIOR_VALIDATION_SEED
+
+    if method not in METHODS:
+        raise ValueError(f"--method must be one of {', '.join(METHODS)}, got {method!r}")
+    if not replace and any(e.goal == goal for e in zoo.entries(env_id)):
+        raise ValueError(f"the zoo already has a prior for {goal!r} in {env_id}; pass --replace to retrain it")
+    if dagger_kwargs.get("validation_episodes", 0) < 0:
+        raise ValueError(f"--validation-episodes must be >= 0, got {dagger_kwargs['validation_episodes']}")
+    venv = make_vec(env_id, goal, n_envs=n_envs, seed=seed)
+    if method == "dagger":
+        validation = dagger_kwargs.get("validation_episodes", 0)
+        validation_env = make_vec(env_id, goal, n_envs=n_envs, seed=PRIOR_VALIDATION_SEED) if validation else None
+        model, record = train_dagger(venv, seed=seed, validation_env=validation_env,
+                                     validation_seed=PRIOR_VALIDATION_SEED, progress=progress, **dagger_kwargs)
+    else:
+        model, record = train_rl(venv, method, steps, seed=seed, progress_bar=progress is not None)
+    with tempfile.TemporaryDirectory() as tmp:
+        model.save(Path(tmp) / "model.zip")
+        entry = zoo.add(Path(tmp) / "model.zip", goal, env_id, training=record, command=command, replace=replace)
+    return record_evaluations(zoo, entry, episodes) if episodes else (entry, {})
+
+
+def record_evaluations(zoo: Any, entry: Any, episodes: int,
+                       progress: Optional[Callable[[str, int], None]] = None) -> tuple[Any, dict[str, Evaluation]]:
+    """
+    Evaluate a zoo entry alone greedy and sampled (env seeds from ``PRIOR_CARD_SEED``) and record both on its card.
+
+    :param progress: Called with the label and the number of finished episodes
+    :return: The entry as read back, and the evaluations by label ("greedy", "sampled")
+    """
+    from sb3_disagree.defaults import PRIOR_CARD_SEED
+
+    evaluations = {}
+    for label in ("greedy", "sampled"):
+        evaluations[label] = evaluate_entry(zoo, entry, episodes, label == "greedy", PRIOR_CARD_SEED,
+                                            (lambda n, label=label: progress(label, n)) if progress else None)
+        entry = zoo.record_evaluation(entry, {**evaluations[label].as_dict(), "seed": PRIOR_CARD_SEED})
+    return entry, evaluations
+
+
+def add_prior(zoo: Any, model_path: Any, env_id: str, goal: Optional[str] = None, episodes: int = 100,
+              replace: bool = False, command: str = "",
+              progress: Optional[Callable[[str, int], None]] = None) -> tuple[Any, dict[str, Evaluation]]:
+    """
+    Add a saved SB3 model to the zoo and record its evaluation alone (greedy and sampled) on its card: what
+    ``dopt priors add`` does. A model card beside the model (as ``dopt train`` writes) gives the goal and how
+    the model was trained. Loading a model file runs code it may hold (SB3 files are pickles): add only files
+    you trust.
+
+    :param zoo: The :class:`~sb3_disagree.priors.zoo.Zoo`
+    :param model_path: The model file
+    :param env_id: Its environment
+    :param goal: The goal it reaches (default: the goal on its model card)
+    :param episodes: Evaluation episodes each way for the card (0: none)
+    :param replace: Replace an existing prior for this goal
+    :param command: The command that added it, for the card
+    :param progress: Called with the label and the number of finished episodes
+    :return: The zoo entry (as read back) and the evaluations by label
+    """
+    from pathlib import Path
+
+    from sb3_disagree.model_card import CARD_NAME, read_model_card
+
+    model_path = Path(model_path)
+    if not model_path.exists():
+        raise FileNotFoundError(f"{model_path} does not exist")
+    run = read_model_card(model_path.parent / CARD_NAME).get("sb3_disagree") or {}
+    if goal is None:
+        if not run.get("goal"):
+            raise ValueError(f"--goal is needed: no model card with a goal beside {model_path}")
+        goal = str(run["goal"])
+    if run.get("env_id") and run["env_id"] != env_id:
+        raise ValueError(f"the model card beside {model_path} says it was trained in {run['env_id']}, not {env_id}; "
+                         f"pass --env {run['env_id']}")
+    made = {"model_card": {k: run.get(k) for k in ("mode", "steps", "seed", "command", "priors")}} if run else {}
+    entry = zoo.add(model_path, goal, env_id, training={"method": "external", **made}, command=command, replace=replace)
+    return record_evaluations(zoo, entry, episodes, progress) if episodes else (entry, {})
