@@ -4,9 +4,14 @@ along the run, and after the run over ``--episodes`` episodes from other starts 
 sampled and with greedy actions. Writes a figure and a table into docs/results.md.
 
     python benchmarks/policy_alone.py fig3-bathtub-300k [--cell disagreement] [--episodes 100]
+
+The end-of-run evaluations need the runs' models (not tracked); each is kept in the experiment's tracked
+``alone-CELL.json`` when measured, and read from there where the model is gone, so the figure and table
+regenerate from a clone.
 """
 
 import argparse
+import json
 import os
 import platform
 from pathlib import Path
@@ -45,6 +50,8 @@ def main() -> None:
     runs = [r for r in experiment.runs() if r.cell == args.cell and r.finished(ROOT / experiment.name)]
     if not runs:
         raise SystemExit(f"no finished {args.cell} runs of {experiment.name}; run: dopt experiment run {experiment.name}")
+    kept_path = ROOT / experiment.name / f"alone-{args.cell}.json"
+    kept = json.loads(kept_path.read_text()) if kept_path.exists() else {}
     columns = np.linspace(experiment.steps / 5, experiment.steps, 5).astype(int)
     fig, ax = plt.subplots(figsize=(7, 4))
     rows = []
@@ -52,13 +59,20 @@ def main() -> None:
         folder = run.folder(ROOT / experiment.name)
         evals = np.load(folder / "evaluations.npz")
         steps, success = evals["timesteps"], evals["successes"].mean(axis=1)
-        sampled, greedy = success_alone(folder, args.episodes)
+        if (folder / "model.zip").exists():
+            sampled, greedy = success_alone(folder, args.episodes)
+            kept[str(run.seed)] = {"sampled": sampled, "greedy": greedy, "episodes": args.episodes, "env_seed": SEED}
+        elif str(run.seed) in kept and kept[str(run.seed)]["episodes"] == args.episodes:
+            sampled, greedy = kept[str(run.seed)]["sampled"], kept[str(run.seed)]["greedy"]
+        else:
+            raise SystemExit(f"{folder} has no model.zip and {kept_path} no {args.episodes}-episode evaluation of it")
         ax.plot(steps, success, marker="o", ms=3, label=f"seed {run.seed}")
         reached = steps[success >= 0.95]
         rows.append(f"| {run.seed} | " + " | ".join(
             f"{success[steps == c][0]:.2f}" if (steps == c).any() else "-" for c in columns)
             + f" | {f'{reached[0] // 1000}k' if len(reached) else 'never'} | {sampled:.2f} | {greedy:.2f} |")
         print(rows[-1], flush=True)
+    kept_path.write_text(json.dumps(kept, indent=2) + "\n")
     ax.axhline(0.95, color="grey", lw=0.8, ls="--")
     ax.set(xlabel="env steps", ylabel="success of the new policy alone", ylim=(-0.02, 1.02),
            title=f"{experiment.name}, {args.cell}: the new policy alone (20 episodes per point)")
