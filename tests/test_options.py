@@ -250,3 +250,25 @@ def test_prior_teacher_acts_with_the_policy_and_offers_the_priors_mixture():
     step = b(None, pi, [{}] * n, np.ones(n, dtype=bool))
     assert th.allclose(step.mu, pi) and np.allclose(_empirical([step])[0], pi[0].numpy(), atol=0.03)
     assert th.allclose(step.teacher, prior_probs.mean(0)) and not step.followed.any()
+
+
+def test_greedy_phase_acts_by_the_argmax_with_an_exact_mu_after_its_start():
+    from sb3_disagree.behaviour import GreedyPhase
+    from sb3_disagree.options import PriorTeacher
+
+    n = 3000
+    prior_probs = _priors(AGREE, n)
+    pi = th.tensor([[0.2, 0.5, 0.3]]).expand(n, A)
+    model = SimpleNamespace(n_envs=n, device=th.device("cpu"), num_timesteps=0)
+    b = GreedyPhase(PriorTeacher(FakePriors(prior_probs)), start=100, epsilon=0.2)
+    b.setup(model)
+    before = b(None, pi, [{}] * n, np.ones(n, dtype=bool))
+    assert th.allclose(before.mu, pi)  # the inner behaviour's step, untouched
+    model.num_timesteps = 100
+    during = b(None, pi, [{}] * n, np.zeros(n, dtype=bool))
+    expected = th.tensor([0.8 * 0 + 0.2 * 0.2, 0.8 + 0.2 * 0.5, 0.2 * 0.3])  # (1 - eps) onehot(argmax) + eps pi
+    assert th.allclose(during.mu, expected.expand(n, A)) and th.allclose(during.mu.sum(-1), th.ones(n))
+    assert np.allclose(_empirical([during])[0], expected.numpy(), atol=0.03)  # the actions are draws from mu
+    assert th.allclose(during.teacher, prior_probs.mean(0)) and (during.tags == "greedy").all()
+    with pytest.raises(ValueError):
+        GreedyPhase(PriorTeacher(FakePriors(prior_probs)), start=0, epsilon=0.0)

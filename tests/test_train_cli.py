@@ -59,6 +59,18 @@ def test_train_writes_the_run_folder(zoo, tmp_path, mode):
     evaluate_policy(model, env, n_eval_episodes=1)
 
 
+def test_greedy_phase_takes_the_end_of_the_budget(zoo, tmp_path):
+    import pandas as pd
+
+    result = runner.invoke(app, _train_args(zoo, tmp_path, "--mode", "kickstart", "--greedy-phase", "200"))
+    assert result.exit_code == 0, result.output
+    run = tmp_path / "sb3_disagree__ApartmentState-v0" / "bathtub" / "kickstart-0"
+    log = pd.read_csv(run / "progress.csv").dropna(subset=["behaviour/greedy_phase"])
+    steps, share = log["time/total_timesteps"].to_numpy(), log["behaviour/greedy_phase"].to_numpy()
+    assert (share[steps <= 200] == 0).all() and (share[steps > 240] == 1).all()  # 2 envs x 20 steps per segment
+    assert yaml.safe_load((run / "config.yaml").read_text())["greedy_phase"] == 200
+
+
 def test_periodic_evaluation_of_the_policy_alone(zoo, tmp_path):
     import numpy as np
 
@@ -189,6 +201,8 @@ def test_resumed_run_appends_to_its_history(zoo, tmp_path):
 
 
 @pytest.mark.parametrize("extra,message", [
+    (["--greedy-phase", "500"], "--greedy-phase must be between 0 and --steps"),
+    (["--greedy-phase", "100", "--mode", "ppo"], "--greedy-phase is a behaviour of ACER"),
     (["--beta", "-0.5"], "--beta must be >= 0"),
     (["--mode", "greedy"], "--mode must be one of"),
     (["--priors", "shower"], "at least two"),

@@ -60,6 +60,10 @@ class RunConfig:
         "finetune" does, for any mode: e.g. disagreement options with a new policy that starts as the prior)
     :param record_trajectories: Write env 0's episodes (positions and per-step tags) to ``trajectories.jsonl``, for
         the trajectory pictures (``dopt eval --trajectory``, Figure 5)
+    :param greedy_phase: The last this many env steps of the budget act by the new policy's argmax (with
+        probability greedy_epsilon a sample of it instead): the states where the greedy policy gets stuck are
+        visited and learned from (0: no such phase)
+    :param greedy_epsilon: The policy's own weight in the behaviour during the greedy phase, in (0, 1]
     :param checkpoint_every: Write a checkpoint (model, replay buffer, log positions) every this many env steps;
         0 only at the end
     """
@@ -87,6 +91,8 @@ class RunConfig:
     checkpoint_every: int = 25_000
     init: str = "scratch"
     record_trajectories: bool = False
+    greedy_phase: int = 0
+    greedy_epsilon: float = 0.2
 
     def validate(self) -> None:
         self._check_types()
@@ -115,6 +121,11 @@ class RunConfig:
             raise ValueError(f"--frame-stack must be >= 1, got {self.frame_stack}")
         if self.frame_stack > 1 and self.mode == "ppo":
             raise ValueError("--frame-stack is an ACER policy's memory; --mode ppo trains SB3's PPO without it")
+        if not 0 <= self.greedy_phase <= self.steps or not 0 < self.greedy_epsilon <= 1:
+            raise ValueError("--greedy-phase must be between 0 and --steps and --greedy-epsilon in (0, 1], got "
+                             f"{self.greedy_phase} and {self.greedy_epsilon}")
+        if self.greedy_phase and self.mode == "ppo":
+            raise ValueError("--greedy-phase is a behaviour of ACER; --mode ppo trains SB3's PPO without one")
         if self.eval_every < 0 or self.eval_episodes < 1:
             raise ValueError("--eval-every must be >= 0 and --eval-episodes positive")
 

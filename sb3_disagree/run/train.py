@@ -21,6 +21,7 @@ import yaml
 from stable_baselines3.common.callbacks import BaseCallback, CallbackList
 
 from sb3_disagree.acer import ACER
+from sb3_disagree.behaviour import GreedyPhase, OnPolicyBehaviour
 from sb3_disagree.checkpoints import Checkpoint, latest_checkpoint, save_checkpoint, sigterm_as_interrupt, truncate_logs
 from sb3_disagree.files import write_atomic
 from sb3_disagree.options import PriorSet, make_options
@@ -92,6 +93,9 @@ def train(config: RunConfig, out: Path = Path("runs"), resume: Optional[Path] = 
                        if config.mode == "jsrl" else 0)
             behaviour = make_options(config.mode, priors, config.alpha, config.beta, config.entropy_offset,
                                      seed=config.seed, horizon=horizon)
+        if config.greedy_phase:
+            behaviour = GreedyPhase(behaviour or OnPolicyBehaviour(), config.steps - config.greedy_phase,
+                                    config.greedy_epsilon)
         saved_config = dict(asdict(config), chosen_priors=prior_names, similarities=sims)
         if resume is not None:
             model = _resumed_model(config, run_dir, env, behaviour, checkpoint)
