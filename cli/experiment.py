@@ -95,9 +95,9 @@ def report(
         from sb3_disagree.experiments.spec import load_experiment
         from sb3_disagree.experiments.writeup import write_report
 
-        experiment = load_experiment(name)
-        experiment.restrict(seeds=_seeds(seeds))
+        experiment, only = load_experiment(name), _seeds(seeds)
+        experiment.restrict(seeds=only)
         root = _root(experiment.name, out)
-        console.print(write_report(experiment, root, figure, note, section, _seeds(seeds)))
+        console.print(write_report(experiment, root, figure, note, section, only))
         console.print(f"wrote {root / 'report.md'} and {root / (experiment.name + '.png')}"
                       + (f"; the section {experiment.name} of {section}" if section else ""))

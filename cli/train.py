@@ -79,7 +79,7 @@ def train(**options) -> None:
         steps = options["steps"]
         config = RunConfig(**{**options, "steps": steps or 100_000, "priors": _priors(options["priors"])})
         config.validate() if resume is None else check_resume(config, resume, force)
-        display = _display(every)
+        display = _Display(every)
         with display as callback:
             run_dir, model, finished = run(config, out, resume=resume, callbacks=[callback], force=force,
                                            on_priors=_show_priors, steps=steps if resume is not None else None)
@@ -98,7 +98,7 @@ def _show_priors(names, sims) -> None:
                                          for n, s in zip(names, sims)))
 
 
-class _display:
+class _Display:
     """The live table on a terminal; plain progress lines at a fixed interval elsewhere (a log file, a pipe, a
     batch scheduler)."""
 

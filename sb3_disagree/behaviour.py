@@ -125,6 +125,10 @@ class GreedyPhase(BehaviourPolicy):
                              followed=None if step.followed is None else np.zeros(len(probs), np.float32))
 
     def record(self, logger: "Logger") -> None:
+        share = float(np.mean(self._greedy)) if self._greedy else 0.0
         self.inner.record(logger)
-        logger.record("behaviour/greedy_phase", float(np.mean(self._greedy)) if self._greedy else 0.0)
+        # The inner behaviour counts the priors it would have followed; in the phase none were.
+        if "prior/usage" in logger.name_to_value:
+            logger.record("prior/usage", logger.name_to_value["prior/usage"] * (1 - share))
+        logger.record("behaviour/greedy_phase", share)
         self._greedy = []

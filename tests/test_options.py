@@ -272,3 +272,24 @@ def test_greedy_phase_acts_by_the_argmax_with_an_exact_mu_after_its_start():
     assert th.allclose(during.teacher, prior_probs.mean(0)) and (during.tags == "greedy").all()
     with pytest.raises(ValueError):
         GreedyPhase(PriorTeacher(FakePriors(prior_probs)), start=0, epsilon=0.0)
+
+
+def test_greedy_phase_reports_no_prior_usage_for_the_steps_it_took_over():
+    from stable_baselines3.common.logger import Logger
+
+    from sb3_disagree.behaviour import GreedyPhase, OnPolicyBehaviour
+
+    class Half(OnPolicyBehaviour):  # an inner behaviour that would have followed priors half the time
+        def record(self, logger):
+            logger.record("prior/usage", 0.5)
+
+    model = SimpleNamespace(num_timesteps=0)
+    b = GreedyPhase(Half(), start=2, epsilon=0.2)
+    b.setup(model)
+    pi = th.tensor([[0.2, 0.5, 0.3]])
+    for t in range(4):  # two steps before the phase, two in it
+        model.num_timesteps = t
+        b(None, pi, [{}], np.zeros(1, dtype=bool))
+    logger = Logger(None, [])
+    b.record(logger)
+    assert logger.name_to_value["behaviour/greedy_phase"] == 0.5 and logger.name_to_value["prior/usage"] == 0.25

@@ -7,7 +7,7 @@ from typing import Any, Optional, Union
 
 import numpy as np
 
-from sb3_disagree.priors.language import load_embedding, select_priors
+from sb3_disagree.priors.language import load_embedding, rank_by_similarity, select_priors
 from sb3_disagree.priors.zoo import Zoo, ZooError
 
 PathLike = Union[str, Path, None]
@@ -70,8 +70,6 @@ def rank_entries(goal: str, entries: Sequence[Any], embedding: Any, k: int = 2) 
     :param k: How many priors the goal would use
     :return: Each entry's similarity to ``goal``, and the goals of the ``k`` usable ones chosen
     """
-    from sb3_disagree.priors.language import rank_by_similarity
-
     usable = {e.goal for e in entries if not e.problem}
     ranked = rank_by_similarity(goal, [e.goal for e in entries], embedding)
     return dict(ranked), {label for label, _ in [r for r in ranked if r[0] in usable][:k]}
