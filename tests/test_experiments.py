@@ -107,7 +107,14 @@ def test_summary_numbers_match_the_runs(zoo, tmp_path):
         assert 0 <= s.auc <= 1
         assert s.cell != "scratch" or np.isnan(s.usage).all()
         assert list(s.alone_steps) == [160, 320] and ((0 <= s.alone_mean) & (s.alone_mean <= 1)).all()
-    assert table_markdown(experiment, summaries).count("\n") == 1 + len(summaries)
+        assert s.minutes == record["seconds"] / 60
+    table = table_markdown(experiment, summaries)
+    assert table.count("\n") == 1 + len(summaries)
+    # Every row has as many columns as the header, the last one each run's wall-clock in minutes.
+    header, _, *rows = table.splitlines()
+    assert header.endswith("env steps/s | minutes per run |")
+    assert {row.count("|") for row in rows} == {header.count("|")}
+    assert rows[0].endswith(f" {summaries[0].minutes:.1f} |")
     # With one seed, that seed's curve is the mean curve.
     for s in summaries:
         np.testing.assert_array_equal(s.seed_final, [s.mean[-1]])  # nan where too few episodes ended
@@ -235,6 +242,8 @@ def test_a_cell_same_as_another_experiments_run_is_copied_not_trained(zoo, tmp_p
     ({"cells": {}}, "at least one cell"),
     ({"cells": {"a": {"mode": "nonsense"}}}, "--mode"),
     ({"cells": {"a": {"gamma": 0.9}}}, "unknown run fields"),
+    ({"run": {"env_id": "sb3_disagree/ApartmentState-v0"}, "cells": {"a": {}}}, "env_id is set at the top"),
+    ({"cells": {"a": {"seed": 3}}}, "seed is set at the top"),
     ({"cells": {"a": {"beta": -1}}}, "--beta"),
     ({"typo": 1, "cells": {"a": {}}}, "unknown keys"),
     ({"cells": {"a": {"same_as": "fig3-bathtub"}}}, "same_as must read OTHER/CELL"),

@@ -113,6 +113,18 @@ def test_entropy_weight_schedules():
         as_schedule("exp_0.1")
     with pytest.raises(ValueError, match="distill_states"):
         ACER("MlpPolicy", make_vec_env(CueEnv, n_envs=1), distill_states="some")
+    with pytest.raises(ValueError, match="lin_"):
+        ACER("MlpPolicy", make_vec_env(CueEnv, n_envs=1), learning_rate="cos_1e-3")
+
+
+def test_a_linear_learning_rate_falls_to_zero_over_the_budget_and_survives_save_and_load(tmp_path):
+    model = ACER("MlpPolicy", make_vec_env(CueEnv, n_envs=2, seed=0), n_steps=4, learning_rate="lin_0.001", seed=0)
+    model.learn(80)  # ten updates; the last one, with no budget left, changes nothing
+    assert model.policy.optimizer.param_groups[0]["lr"] == 0.0
+    assert model.lr_schedule(0.5) == pytest.approx(0.0005)
+    model.save(tmp_path / "model.zip")
+    loaded = ACER.load(tmp_path / "model.zip")
+    assert loaded.learning_rate == "lin_0.001" and loaded.lr_schedule(0.25) == pytest.approx(0.00025)
 
 
 @pytest.mark.parametrize("policy, env_class", [("MlpPolicy", CueEnv), ("CnnPolicy", ImageEnv)])

@@ -57,7 +57,8 @@ class ACER(BaseAlgorithm):
 
     :param policy: The policy model to use (MlpPolicy, CnnPolicy, ...)
     :param env: The environment to learn from (if registered in Gym, can be str)
-    :param learning_rate: The learning rate, a constant or a function of the remaining progress (from 1 to 0)
+    :param learning_rate: The learning rate: a constant, a function of the remaining progress (from 1 to 0), or
+        ``"lin_<x>"`` for x falling linearly to 0 over the budget (the reference ACER's schedule)
     :param n_steps: Length of a segment: env steps per env between updates
     :param gamma: Discount factor
     :param buffer_size: Replay capacity in env transitions over all envs, stored as whole segments
@@ -109,7 +110,7 @@ class ACER(BaseAlgorithm):
         self,
         policy: Union[str, type[ACERPolicy]],
         env: Union[GymEnv, str],
-        learning_rate: Union[float, Schedule] = 7e-4,
+        learning_rate: Union[float, str, Schedule] = 7e-4,
         n_steps: int = 20,
         gamma: float = 0.99,
         buffer_size: int = 50_000,
@@ -170,7 +171,7 @@ class ACER(BaseAlgorithm):
             raise ValueError(f"distill_states must be 'followed' or 'all', got {distill_states!r}")
         if distill_coef < 0 or distill_steps < 0:
             raise ValueError("distill_coef and distill_steps must be >= 0")
-        as_schedule(ent_coef)  # refuses what is not a weight
+        as_schedule(ent_coef), as_schedule(learning_rate)  # refuse what is not a weight
         self.distill_coef = distill_coef
         self.distill_steps = distill_steps
         self.distill_states = distill_states
@@ -195,6 +196,10 @@ class ACER(BaseAlgorithm):
         self._last_stack: Optional[np.ndarray] = None  # the policy's input: the last frame_stack observations
         self._ent_coef_schedule = as_schedule(self.ent_coef)
         self.last_rollout_tags: Optional[np.ndarray] = None
+
+    def _setup_lr_schedule(self) -> None:
+        # SB3's constants and schedules, and rl-zoo3's "lin_<x>" as the ent_coef takes it.
+        self.lr_schedule = as_schedule(self.learning_rate)
 
     def _excluded_save_params(self) -> list[str]:
         return [*super()._excluded_save_params(), "behaviour", "_last_infos", "_last_stack", "_ent_coef_schedule",

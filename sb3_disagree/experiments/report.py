@@ -44,6 +44,7 @@ class CellSummary:
     final_alone: float
     final_alone_seeds: list[float]
     fps: float
+    minutes: float = float("nan")  # wall-clock per run (training, the periodic evaluations included)
     records: list[dict] = field(default_factory=list)
     alone_steps: np.ndarray = field(default_factory=lambda: np.zeros(0))
     alone_mean: np.ndarray = field(default_factory=lambda: np.zeros(0))
@@ -96,7 +97,8 @@ def summarize(experiment: Experiment, root: Path) -> tuple[np.ndarray, list[Cell
             cell=cell, seeds=[r.seed for r in runs], mean=mean, low=low, high=high, usage=usage,
             steps_to_50=steps_to(mean, grid, 0.5), steps_to_90=steps_to(mean, grid, 0.9), at_budgets=at,
             auc=float(np.mean(np.nan_to_num(mean, nan=0.0))), final_alone=float(np.mean(alone)),
-            final_alone_seeds=alone, fps=float(np.mean([r["fps"] for r in records])), records=records,
+            final_alone_seeds=alone, fps=float(np.mean([r["fps"] for r in records])),
+            minutes=float(np.mean([r["seconds"] for r in records])) / 60, records=records,
             alone_steps=alone_steps, alone_mean=alone_mean, alone_greedy=alone_greedy,
             final_greedy_seeds=greedy if len(greedy) == len(records) else [], seed_final=[float(c[-1]) for c in curves],
             seed_steps_to_90=[steps_to(c, grid, 0.9) for c in curves]))
@@ -118,11 +120,13 @@ def table_markdown(experiment: Experiment, summaries: list[CellSummary]) -> str:
     """The report's table as Markdown."""
     budgets = "".join(f" success at {_steps(b)} |" for b in experiment.budgets)
     lines = [f"| cell | seeds | steps to 50% | steps to 90% |{budgets} AUC | new policy alone (final), greedy | "
-             "new policy alone (final), sampled | env steps/s |", "|---" * (8 + len(experiment.budgets)) + "|"]
+             "new policy alone (final), sampled | env steps/s | minutes per run |",
+             "|---" * (9 + len(experiment.budgets)) + "|"]
     for s in summaries:
         at = "".join(f" {s.at_budgets[b]:.2f} |" for b in experiment.budgets)
         lines.append(f"| {s.cell} | {len(s.seeds)} | {_steps(s.steps_to_50)} | {_steps(s.steps_to_90)} |{at} "
-                     f"{s.auc:.2f} | {_per_seed(s.final_greedy_seeds)} | {_per_seed(s.final_alone_seeds)} | {s.fps:.0f} |")
+                     f"{s.auc:.2f} | {_per_seed(s.final_greedy_seeds)} | {_per_seed(s.final_alone_seeds)} | {s.fps:.0f} | "
+                     f"{s.minutes:.1f} |")
     return "\n".join(lines)
 
 

@@ -47,6 +47,8 @@ RESULT = "result.json"
 OUTPUT_ONLY = ("record_trajectories", "checkpoint_every")
 # What a continuation must share with the run it continues (everything but the budget).
 SAME = ("goal", "env_id", "mode", "alpha", "beta", "seed", "n_envs", "acer_kwargs")
+# RunConfig fields the grid sets itself (``seed`` from ``seeds``, ``acer_kwargs`` from ``acer``).
+GRID_WIDE = ("goal", "env_id", "priors", "steps", "seed", "acer_kwargs")
 
 
 @dataclass
@@ -193,6 +195,11 @@ class Experiment:
                 unknown = set(fields) - set(RunConfig.__dataclass_fields__)
                 if unknown:
                     raise ValueError(f"experiment {self.name!r}, cell {cell!r}: unknown run fields {sorted(unknown)}")
+                # The grid's own fields are set once, at the top of the file, for every cell and seed.
+                grid_wide = sorted(set(fields) & set(GRID_WIDE))
+                if grid_wide:
+                    raise ValueError(f"experiment {self.name!r}, cell {cell!r}: {', '.join(grid_wide)} is set at the "
+                                     f"top of the experiment file, not in run or a cell")
                 if self.trajectories:  # the report draws each cell's recorded episodes
                     fields.setdefault("record_trajectories", True)
                 config = RunConfig(goal=self.goal, env_id=self.env_id, priors=self.priors, steps=self.steps, seed=seed,
