@@ -58,9 +58,9 @@ def policy_change(before: ACER, after: ACER, config: RunConfig, steps: int = 400
     with th.no_grad():
         p, q = before.policy.action_probs(states), after.policy.action_probs(states)
     kl = (p * (th.log(p + 1e-9) - th.log(q + 1e-9))).sum(1).numpy()
-    return {"kl_mean": float(kl.mean()), "kl_p95": float(np.percentile(kl, 95)),
-            "argmax_changed": float((p.argmax(1) != q.argmax(1)).float().mean()),
-            "probs_before": p.mean(0).round(3).tolist(), "probs_after": q.mean(0).round(3).tolist()}
+    return {"kl_mean": round(float(kl.mean()), 4), "kl_p95": round(float(np.percentile(kl, 95)), 4),
+            "argmax_changed": round(float((p.argmax(1) != q.argmax(1)).float().mean()), 3),
+            "probs_before": [round(float(v), 3) for v in p.mean(0)], "probs_after": [round(float(v), 3) for v in q.mean(0)]}
 
 
 def rerun(run_dir: Path, episodes: int) -> None:
