@@ -206,7 +206,7 @@ def plot(experiment: Experiment, grid: np.ndarray, summaries: list[CellSummary],
     half = grid_spec.ncols // 2
     ax1, ax2 = fig.add_subplot(grid_spec[0, :half]), fig.add_subplot(grid_spec[0, half:])
     path_axes = [fig.add_subplot(grid_spec[1, 2 * j:2 * j + 2]) for j in range(n_paths)]
-    colors = plt.get_cmap("tab10")
+    colors = plt.get_cmap("tab10" if len(summaries) <= 10 else "tab20")  # one colour per cell, however many
     for i, s in enumerate(summaries):
         # With two seeds the t-interval (t = 12.7) spans the whole axis and hides the curves: no band then.
         banded = len(s.seeds) >= MIN_SEEDS_FOR_BAND
