@@ -4,8 +4,8 @@ What the last train call does to a finished run's policy (docs/results.md, "Agai
 ``rerun RUN_DIR``: train the run again from its ``config.yaml`` (runs are deterministic given their configuration,
 seed and one torch thread), keep the policy as it was at the last periodic evaluation, and compare it with the
 final one: that the rerun ends equal to the saved model, the mean KL between the two on states the earlier policy
-visits, how often their argmax differs, and both policies' sampled success alone from the final evaluation's env
-seeds. About one run's time.
+visits, how often their argmax differs, and both policies' success alone, greedy and sampled, from the final
+evaluation's env seeds. About one run's time.
 
 ``survey``: over every finished run under benchmarks/results/experiments whose last periodic evaluation is at its
 budget, the periodic evaluation (before the last train call, 20 episodes) against the final one (after it, 100).
@@ -17,6 +17,7 @@ budget, the periodic evaluation (before the last train call, 20 episodes) agains
 import argparse
 import json
 import tempfile
+from dataclasses import asdict
 from pathlib import Path
 
 import numpy as np
@@ -25,10 +26,10 @@ import yaml
 from stable_baselines3.common.callbacks import BaseCallback
 
 from sb3_disagree.acer import ACER
-from sb3_disagree.defaults import FINAL_EVAL_SEED_OFFSET
-from sb3_disagree.evaluation import evaluate
+from sb3_disagree.options.disagreement import kl as divergence
 from sb3_disagree.run import RunConfig, train
 from sb3_disagree.run.envs import build_env
+from sb3_disagree.run.evaluation import evaluate_both
 
 
 class KeepAt(BaseCallback):
@@ -57,7 +58,7 @@ def policy_change(before: ACER, after: ACER, config: RunConfig, steps: int = 400
     states = before.policy.obs_to_tensor(np.concatenate(seen))[0]
     with th.no_grad():
         p, q = before.policy.action_probs(states), after.policy.action_probs(states)
-    kl = (p * (th.log(p + 1e-9) - th.log(q + 1e-9))).sum(1).numpy()
+    kl = divergence(p, q).numpy()
     return {"kl_mean": round(float(kl.mean()), 4), "kl_p95": round(float(np.percentile(kl, 95)), 4),
             "argmax_changed": round(float((p.argmax(1) != q.argmax(1)).float().mean()), 3),
             "probs_before": [round(float(v), 3) for v in p.mean(0)], "probs_after": [round(float(v), 3) for v in q.mean(0)]}
@@ -65,8 +66,7 @@ def policy_change(before: ACER, after: ACER, config: RunConfig, steps: int = 400
 
 def rerun(run_dir: Path, episodes: int) -> None:
     th.set_num_threads(1)
-    saved = yaml.safe_load((run_dir / "config.yaml").read_text())
-    config = RunConfig(**{k: v for k, v in saved.items() if k in RunConfig.__dataclass_fields__})
+    config = RunConfig.of_saved(yaml.safe_load((run_dir / "config.yaml").read_text()))
     with tempfile.TemporaryDirectory() as tmp:
         kept = Path(tmp) / "at-last-evaluation.zip"
         _, final, _ = train(config, run_dir=Path(tmp) / "run", force=True, callbacks=[KeepAt(config.steps, kept)])
@@ -76,11 +76,9 @@ def rerun(run_dir: Path, episodes: int) -> None:
     print(f"rerun's final weights vs the saved model's: largest difference {same}")
     print("the last train call:", policy_change(before, final, config))
     for name, model in (("at the last periodic evaluation", before), ("final", final)):
-        env = build_env(config, None, n_envs=4, seed=config.seed + FINAL_EVAL_SEED_OFFSET, vec_env="dummy")
-        result = evaluate(model, env, episodes, deterministic=False)
-        env.close()
-        print(f"{name}: sampled success alone {result.success_rate:.2f}, mean length {result.mean_length:.0f} "
-              f"({episodes} episodes)")
+        both = evaluate_both(model, asdict(config), episodes)  # the final evaluation's env seeds
+        print(f"{name}: success alone " + ", ".join(f"{label} {e.success_rate:.2f} (mean length {e.mean_length:.0f})"
+                                                    for label, e in both.items()) + f", {episodes} episodes each")
 
 
 def survey(root: Path) -> None:

@@ -47,8 +47,6 @@ RESULT = "result.json"
 OUTPUT_ONLY = ("record_trajectories", "checkpoint_every")
 # What a continuation must share with the run it continues (everything but the budget).
 SAME = ("goal", "env_id", "mode", "alpha", "beta", "seed", "n_envs", "acer_kwargs")
-# RunConfig fields the grid sets itself (``seed`` from ``seeds``, ``acer_kwargs`` from ``acer``).
-GRID_WIDE = ("goal", "env_id", "priors", "steps", "seed", "acer_kwargs")
 
 
 @dataclass
@@ -196,14 +194,15 @@ class Experiment:
                 if unknown:
                     raise ValueError(f"experiment {self.name!r}, cell {cell!r}: unknown run fields {sorted(unknown)}")
                 # The grid's own fields are set once, at the top of the file, for every cell and seed.
-                grid_wide = sorted(set(fields) & set(GRID_WIDE))
+                grid = dict(goal=self.goal, env_id=self.env_id, priors=self.priors, steps=self.steps, seed=seed,
+                            acer_kwargs=acer)
+                grid_wide = sorted(set(fields) & set(grid))
                 if grid_wide:
                     raise ValueError(f"experiment {self.name!r}, cell {cell!r}: {', '.join(grid_wide)} is set at the "
                                      f"top of the experiment file, not in run or a cell")
                 if self.trajectories:  # the report draws each cell's recorded episodes
                     fields.setdefault("record_trajectories", True)
-                config = RunConfig(goal=self.goal, env_id=self.env_id, priors=self.priors, steps=self.steps, seed=seed,
-                                   acer_kwargs=acer, **fields)
+                config = RunConfig(**grid, **fields)
                 config.validate()
                 out.append(Run(cell, seed, config, self.final_episodes, same_as))
         return out

@@ -94,6 +94,12 @@ class RunConfig:
     greedy_phase: int = 0
     greedy_epsilon: float = 0.2
 
+    @classmethod
+    def of_saved(cls, saved: dict[str, Any]) -> "RunConfig":
+        """The configuration in a run's ``config.yaml`` (read as a mapping), without what the run added to it
+        (the chosen priors, their similarities, the steps taken)."""
+        return cls(**{k: v for k, v in saved.items() if k in cls.__dataclass_fields__})
+
     def validate(self) -> None:
         self._check_types()
         safe_name(self.goal, "--goal")

@@ -59,7 +59,7 @@ def train(config: RunConfig, out: Path = Path("runs"), resume: Optional[Path] = 
         if not (run_dir / "config.yaml").exists() or not (run_dir / "model.zip").exists():
             raise FileNotFoundError(f"{run_dir} is not a run folder with config.yaml and model.zip to resume")
         saved = yaml.safe_load((run_dir / "config.yaml").read_text())
-        config = RunConfig(**{k: v for k, v in saved.items() if k in RunConfig.__dataclass_fields__})
+        config = RunConfig.of_saved(saved)
         checkpoint = latest_checkpoint(run_dir)
         done = checkpoint[1]["num_timesteps"] if checkpoint else int(saved.get("num_timesteps") or 0)
         if steps is not None:  # a finished run continues to a larger budget
