@@ -82,7 +82,7 @@ def rerun(run_dir: Path, episodes: int) -> None:
 
 
 def survey(root: Path) -> None:
-    gaps = []
+    gaps: dict[str, list[float]] = {"sampled": [], "greedy": []}
     for result in sorted(root.glob("*/*/seed-*/result.json")):
         record, evaluations = json.loads(result.read_text()), result.parent / "evaluations.npz"
         if not evaluations.exists():
@@ -90,10 +90,13 @@ def survey(root: Path) -> None:
         with np.load(evaluations) as data:
             if data["timesteps"][-1] != record["steps"]:
                 continue
-            gaps.append(data["successes"][-1].mean() - record["final_alone"]["success_rate"])
-    gaps = np.array(gaps)
-    print(f"{len(gaps)} runs: periodic evaluation at the budget minus the final one, sampled: mean {gaps.mean():+.3f}, "
-          f"sd {gaps.std():.3f}, standard error {gaps.std() / np.sqrt(len(gaps)):.3f}, higher in {np.mean(gaps > 0):.0%}")
+            gaps["sampled"].append(data["successes"][-1].mean() - record["final_alone"]["success_rate"])
+            if "successes_greedy" in data and "final_alone_greedy" in record:  # runs that measured both
+                gaps["greedy"].append(data["successes_greedy"][-1].mean() - record["final_alone_greedy"]["success_rate"])
+    for label, values in gaps.items():
+        g = np.array(values)
+        print(f"{label}, {len(g)} runs: periodic evaluation at the budget minus the final one: mean {g.mean():+.3f}, "
+              f"sd {g.std():.3f}, standard error {g.std() / np.sqrt(len(g)):.3f}, higher in {np.mean(g > 0):.0%}")
 
 
 if __name__ == "__main__":
