@@ -135,6 +135,44 @@ def test_report_refuses_a_run_whose_monitor_files_miss_steps(zoo, tmp_path):
         summarize(experiment, out)
 
 
+def test_report_reads_training_curves_kept_in_one_file(zoo, tmp_path):
+    """The report keeps every run's training curve in training-success.csv and reads it back, the same numbers,
+    once the runs' monitor files are gone; a restricted report keeps the other seeds' rows."""
+    import shutil
+
+    from sb3_disagree.experiments.writeup import write_report
+
+    experiment = load_experiment(str(_grid(tmp_path, zoo, seeds=(0, 1))))
+    experiment.cells = {"scratch": experiment.cells["scratch"]}
+    out = tmp_path / "results"
+    run_experiment(experiment, out, jobs=1)
+    for seed in (0, 1):  # 20 episodes of 8 steps in each env, as if they had ended: success on alternate ones
+        for f in (out / "scratch" / f"seed-{seed}" / "monitor").glob("*.monitor.csv"):
+            head = f.read_text().splitlines()[:2]
+            f.write_text("\n".join(head + [f"0.0,8,{i},{(i + seed) % 2 == 0}" for i in range(20)]) + "\n")
+    grid, before = summarize(experiment, out)
+    assert np.nanmax(before[0].mean) > 0  # the curves have values to keep
+    write_report(experiment, out)
+    kept = pd.read_csv(out / "training-success.csv")
+    assert list(kept["seed"]) == [0, 1] and kept.shape[1] == 2 + len(grid)
+    for seed in (0, 1):
+        shutil.rmtree(out / "scratch" / f"seed-{seed}" / "monitor")
+    _, after = summarize(experiment, out)
+    np.testing.assert_array_equal(before[0].mean, after[0].mean)
+    for b, a in zip(before[0].seed_curves, after[0].seed_curves):
+        np.testing.assert_array_equal(b, a)
+    assert before[0].seed_steps_to_90 == after[0].seed_steps_to_90
+    experiment.restrict(seeds=[0])
+    write_report(experiment, out)
+    assert list(pd.read_csv(out / "training-success.csv")["seed"]) == [0, 1]
+    # A run with neither its monitor files nor a row: refused, naming it.
+    kept[kept["seed"] == 0].to_csv(out / "training-success.csv", index=False)
+    experiment = load_experiment(str(_grid(tmp_path, zoo, seeds=(0, 1))))
+    experiment.cells = {"scratch": experiment.cells["scratch"]}
+    with pytest.raises(ValueError, match="seed-1: no monitor files"):
+        summarize(experiment, out)
+
+
 def test_steps_ratio_is_bounded_where_a_curve_never_gets_there():
     grid = np.linspace(6_000, 300_000, 50)
 

@@ -1,4 +1,5 @@
-"""Training curves read back from run folders (SB3 Monitor files and progress.csv)."""
+"""Training curves read back from run folders (SB3 Monitor files and progress.csv), and an experiment's
+training-success curves kept in one file once its runs' per-episode files are left out of the repository."""
 
 import warnings
 from collections.abc import Sequence
@@ -36,6 +37,45 @@ def success_curve(run_dir: Path, grid: np.ndarray, window: int = 50, min_episode
         if n >= min_episodes:
             out[i] = success[max(0, n - window):n].mean()
     return out
+
+
+def has_monitors(run_dir: Path) -> bool:
+    """Whether the run folder still holds its per-episode Monitor files."""
+    return any((run_dir / "monitor").glob("*.monitor.csv"))
+
+
+# Every run's training success on its report's grid, one row per run (cell, seed, then one column per grid
+# step): what the report reads where a run's monitor files are not there (they stay out of the repository).
+TRAINING_CURVES = "training-success.csv"
+
+
+def read_training_curves(root: Path, grid: np.ndarray) -> dict[tuple[str, int], np.ndarray]:
+    """
+    The curves kept in ``root/TRAINING_CURVES`` by (cell, seed); none where there is no such file.
+
+    :raises ValueError: Where the file was written on another grid (the experiment's steps changed)
+    """
+    path = root / TRAINING_CURVES
+    if not path.exists():
+        return {}
+    df = pd.read_csv(path)
+    steps = np.array([float(c) for c in df.columns[2:]])
+    if len(steps) != len(grid) or not np.allclose(steps, grid):
+        raise ValueError(f"{path} holds curves on another grid of steps ({len(steps)} points to {steps[-1]:,.0f}) "
+                         f"than the experiment's ({len(grid)} to {grid[-1]:,.0f}); remove it and report from "
+                         "runs that still have their monitor files")
+    values = df.iloc[:, 2:].to_numpy(dtype=float)
+    return {(str(cell), int(seed)): values[i] for i, (cell, seed) in enumerate(zip(df["cell"], df["seed"]))}
+
+
+def write_training_curves(root: Path, grid: np.ndarray, curves: dict[tuple[str, int], np.ndarray]) -> Path:
+    """Write ``curves`` into ``root/TRAINING_CURVES``, keeping the rows of other runs already there (a report
+    restricted to some seeds leaves the others' rows as they were). Values keep full precision."""
+    kept = {**read_training_curves(root, grid), **curves}
+    rows = [[cell, seed, *kept[(cell, seed)]] for cell, seed in sorted(kept)]
+    df = pd.DataFrame(rows, columns=["cell", "seed", *[f"{g:.10g}" for g in grid]])
+    df.to_csv(root / TRAINING_CURVES, index=False)
+    return root / TRAINING_CURVES
 
 
 def check_monitor_coverage(run_dir: Path, steps: int, n_envs: int, max_episode_steps: int, legs: int = 1) -> None:

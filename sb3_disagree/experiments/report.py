@@ -13,9 +13,12 @@ import numpy as np
 
 from sb3_disagree.envs.navigation import MAX_EPISODE_STEPS
 from sb3_disagree.experiments.curves import (
+    TRAINING_CURVES,
     check_monitor_coverage,
+    has_monitors,
     mean_and_band,
     progress_curve,
+    read_training_curves,
     steps_to,
     success_curve,
 )
@@ -52,6 +55,7 @@ class CellSummary:
     final_greedy_seeds: list[float] = field(default_factory=list)  # empty where not measured
     seed_final: list[float] = field(default_factory=list)  # each seed's training success at the last grid step
     seed_steps_to_90: list[Optional[float]] = field(default_factory=list)
+    seed_curves: list[np.ndarray] = field(default_factory=list)  # each seed's training success on the grid
 
 
 def alone_curve(folders: list[Path], key: str = "successes") -> tuple[np.ndarray, np.ndarray]:
@@ -70,17 +74,25 @@ def summarize(experiment: Experiment, root: Path) -> tuple[np.ndarray, list[Cell
     grid = np.linspace(experiment.steps / GRID_POINTS, experiment.steps, GRID_POINTS)
     summaries = []
     finished = [r for r in experiment.runs() if r.finished(root)]
+    stored = read_training_curves(root, grid)
     for cell in experiment.cells:
         runs = [r for r in finished if r.cell == cell]
         if not runs:
             continue
         folders = [r.folder(root) for r in runs]
         records = [json.loads((f / RESULT).read_text()) for f in folders]
+        curves = []
         for run, folder, record in zip(runs, folders, records):
-            limit = run.config.env_kwargs.get("max_episode_steps", MAX_EPISODE_STEPS)
-            legs = 2 if "from_steps" in record else 1  # a continued run lost an unfinished episode per env twice
-            check_monitor_coverage(folder, record["steps"], run.config.n_envs, limit, legs=legs)
-        curves = [success_curve(f, grid) for f in folders]
+            if has_monitors(folder):
+                limit = run.config.env_kwargs.get("max_episode_steps", MAX_EPISODE_STEPS)
+                legs = 2 if "from_steps" in record else 1  # a continued run lost an unfinished episode per env twice
+                check_monitor_coverage(folder, record["steps"], run.config.n_envs, limit, legs=legs)
+                curves.append(success_curve(folder, grid))
+            elif (cell, run.seed) in stored:
+                curves.append(stored[(cell, run.seed)])
+            else:
+                raise ValueError(f"{folder}: no monitor files, and {root / TRAINING_CURVES} has no curve of it; "
+                                 "its training curve cannot be read")
         mean, low, high = mean_and_band(curves)
         usage = np.full(len(grid), np.nan)
         if runs[0].config.mode != "scratch":
@@ -101,7 +113,7 @@ def summarize(experiment: Experiment, root: Path) -> tuple[np.ndarray, list[Cell
             minutes=float(np.mean([r["seconds"] for r in records])) / 60, records=records,
             alone_steps=alone_steps, alone_mean=alone_mean, alone_greedy=alone_greedy,
             final_greedy_seeds=greedy if len(greedy) == len(records) else [], seed_final=[float(c[-1]) for c in curves],
-            seed_steps_to_90=[steps_to(c, grid, 0.9) for c in curves]))
+            seed_steps_to_90=[steps_to(c, grid, 0.9) for c in curves], seed_curves=curves))
     return grid, summaries
 
 

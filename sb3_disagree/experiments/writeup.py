@@ -1,7 +1,9 @@
 """
 An experiment's write-up: the figure and the markdown (commands, seeds, machine, table, per-seed numbers,
 the policy alone along the way) as ``report.md`` beside its runs, and, when asked, as a named section of a
-documentation page, so that a page's numbers are always the ones its runs give.
+documentation page, so that a page's numbers are always the ones its runs give. Every run's training-success
+curve is kept in the results folder's ``training-success.csv``, from which the report is made again once the
+runs' per-episode monitor files are gone (they are not committed).
 """
 
 import os
@@ -11,6 +13,7 @@ from typing import Optional
 
 import yaml
 
+from sb3_disagree.experiments.curves import write_training_curves
 from sb3_disagree.experiments.report import (alone_markdown, plot, ratio_markdown, seeds_markdown, summarize,
                                              table_markdown)
 from sb3_disagree.experiments.spec import Experiment
@@ -50,6 +53,7 @@ def write_report(experiment: Experiment, root: Path, figure: Optional[Path] = No
     if not summaries:
         raise FileNotFoundError(f"no finished runs of {experiment.name} in {root}; run: dopt experiment run "
                                 f"{experiment.name} --out {root}")
+    write_training_curves(root, grid, {(s.cell, seed): c for s in summaries for seed, c in zip(s.seeds, s.seed_curves)})
     png = root / f"{experiment.name}.png"
     plot(experiment, grid, summaries, png, root)
     if figure is not None:
