@@ -1,7 +1,7 @@
 """
 Why a trained policy fails greedily: run a saved model alone and report, per episode, whether it succeeded,
-its length, how many distinct poses it visited in its last 60 steps (1: stuck at a fixed point) and its last
-actions; then the same episodes acting by argmax Q instead of argmax pi (docs/results.md).
+its length, how many distinct poses it visited in its last 60 steps (1: stuck at a fixed point), its last
+actions and the policy's distribution at its last step (how far the argmax is from a tie); then the same episodes acting by argmax Q instead of argmax pi (docs/results.md).
 
     python benchmarks/greedy_diagnosis.py RUN_DIR/model.zip [--episodes 12] [--goal bathtub]
 """
@@ -22,10 +22,12 @@ def episodes(model: ACER, goal: str, n: int, by_q: bool) -> list[tuple]:
     obs, state, starts, stack = env.reset(), None, np.ones(4, bool), None
     trails, ended, actions_taken = [[] for _ in range(4)], [], np.zeros(3)
     while len(ended) < n:
+        stack = push_frames(stack, obs.transpose(0, 3, 1, 2), starts, model.policy.frame_stack)
+        with th.no_grad():
+            logits, q = model.policy.logits_and_q(th.as_tensor(stack))
+        probs = th.softmax(logits, -1).numpy()
         if by_q:  # argmax_a Q(s, a) on the policy's own input
-            stack = push_frames(stack, obs.transpose(0, 3, 1, 2), starts, model.policy.frame_stack)
-            with th.no_grad():
-                actions = model.policy.logits_and_q(th.as_tensor(stack))[1].argmax(-1).numpy()
+            actions = q.argmax(-1).numpy()
         else:
             actions, state = model.predict(obs, state=state, episode_start=starts, deterministic=True)
         obs, _, dones, infos = env.step(actions)
@@ -36,7 +38,7 @@ def episodes(model: ACER, goal: str, n: int, by_q: bool) -> list[tuple]:
             if dones[i]:
                 tail = trails[i][-60:]
                 ended.append((bool(infos[i]["is_success"]), len(trails[i]), len({t[:3] for t in tail}),
-                              [t[3] for t in tail[-8:]]))
+                              [t[3] for t in tail[-8:]], np.round(probs[i], 2)))
                 trails[i] = []
         starts = dones
     env.close()
@@ -54,8 +56,9 @@ if __name__ == "__main__":
     model = ACER.load(args.model, device="cpu")
     for label, by_q in (("greedy (argmax pi)", False), ("argmax Q", True)):
         ends = episodes(model, args.goal, args.episodes, by_q)
-        stuck = sum(1 for success, _, poses, _ in ends if not success and poses == 1)
+        stuck = sum(1 for success, _, poses, *_ in ends if not success and poses == 1)
         print(f"{label}: success {np.mean([e[0] for e in ends]):.2f} over {len(ends)} episodes; {stuck} stuck at a "
               "single pose over their last 60 steps")
-        for success, length, poses, last in ends:
-            print(f"  success {success}, length {length}, distinct poses in the last 60 steps {poses}, last actions {last}")
+        for success, length, poses, last, pi in ends:
+            print(f"  success {success}, length {length}, distinct poses in the last 60 steps {poses}, last actions {last}, "
+                  f"pi at the last step {pi}")
