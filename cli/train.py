@@ -70,7 +70,8 @@ def _cli_only(card_episodes: int = 20, progress_every: float = 30.0) -> None:
 
 @command(_run_options())
 def train(**options) -> None:
-    """Train a policy for a new goal: disagreement options, or a peer method (--mode)."""
+    """Train a policy for a new goal from the priors: kickstarted (the default), disagreement options (--mode
+    disagreement), or another peer method (--mode)."""
     with clean_errors():
         from sb3_disagree.run import RunConfig, check_resume, train as run, write_card
 

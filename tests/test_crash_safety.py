@@ -26,7 +26,7 @@ runner = CliRunner()
 
 
 def _args(out, *extra, goal="bathtub"):
-    return ["train", "--goal", goal, "--env", STATE_ID, "--out", str(out), "--n-envs", "2",
+    return ["train", "--goal", goal, "--env", STATE_ID, "--mode", "disagreement", "--out", str(out), "--n-envs", "2",
             "--card-episodes", "0", *extra]
 
 

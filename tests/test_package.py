@@ -67,7 +67,7 @@ def test_the_wheel_works_alone_from_another_folder(tmp_path):
     assert "fig3-bathtub" in run(dopt, "experiment", "list")
     out = run(dopt, "train", "--goal", "bathtub", "--steps", "2000", "--card-episodes", "1")  # the RGB apartment
     assert "done: 2,000 steps" in " ".join(out.split())
-    assert (work / "runs" / "sb3_disagree__Apartment-v0" / "bathtub" / "disagreement-0" / "README.md").exists()
+    assert (work / "runs" / "sb3_disagree__Apartment-v0" / "bathtub" / "kickstart-0" / "README.md").exists()
     run(str(python), "-c", "import gymnasium as gym, sb3_disagree; env = gym.make('sb3_disagree/Office-v0', "
                            "goal='table', obs_width=32, obs_height=24); print(env.reset(seed=0)[0].shape)")
 

@@ -28,7 +28,7 @@ def zoo(tmp_path_factory):
 
 def _train_args(zoo, out, *extra):
     return ["train", "--goal", "bathtub", "--env", STATE_ID, "--zoo", str(zoo), "--out", str(out), "--steps", "400",
-            "--n-envs", "2", *extra]
+            "--n-envs", "2", *(() if "--mode" in extra else ("--mode", "disagreement")), *extra]
 
 
 @pytest.mark.parametrize("mode", ["disagreement", "room-sensor", "scratch", "finetune", "kickstart", "jsrl", "ppo"])

@@ -28,9 +28,11 @@ class RunConfig:
 
     :param goal: The new goal word
     :param env_id: Gymnasium id of the environment
-    :param mode: "disagreement", "room-sensor", "scratch", "finetune" (ACER from the most similar prior's weights,
-        no behaviour), "kickstart" (the new policy acts alone, distilled toward the priors' mixture on every
-        state with a weight annealed to zero: ``KICKSTART`` unless ``acer_kwargs`` say otherwise), "jsrl"
+    :param mode: "kickstart" (the default: the new policy acts alone, distilled toward the priors' mixture on every
+        state with a weight annealed to zero, ``KICKSTART`` unless ``acer_kwargs`` say otherwise; of the modes
+        measured, the one whose saved policy works best on its own, docs/results.md), "disagreement" (the
+        paper's disagreement options), "room-sensor", "scratch", "finetune" (ACER from the most similar prior's
+        weights, no behaviour), "jsrl"
         (Jump-Start RL: the priors guide each episode's first steps, fewer as the new policy succeeds) or
         "ppo" (SB3's PPO from scratch, ``PPO_KWARGS``)
     :param priors: "auto" (by similarity) or the goal labels of the priors
@@ -70,7 +72,7 @@ class RunConfig:
 
     goal: str
     env_id: str = DEFAULT_ENV
-    mode: str = "disagreement"
+    mode: str = "kickstart"
     priors: Any = "auto"
     alpha: int = 10
     beta: float = 0.1
