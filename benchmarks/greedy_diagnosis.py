@@ -1,7 +1,8 @@
 """
 Why a trained policy fails greedily: run a saved model alone and report, per episode, whether it succeeded,
 its length, how many distinct poses it visited in its last 60 steps (1: stuck at a fixed point), its last
-actions and the policy's distribution at its last step (how far the argmax is from a tie); then the same episodes acting by argmax Q instead of argmax pi (docs/results.md).
+actions and the policy's distribution at its last step (how far the argmax is from a tie); then the same
+episodes acting by argmax Q instead of argmax pi (docs/results.md).
 
     python benchmarks/greedy_diagnosis.py RUN_DIR/model.zip [--episodes 12] [--goal bathtub]
 """
