@@ -180,7 +180,7 @@ def _make_options() -> list:
     return [*options_of(make_prior, only=("goal", "method", "env_id", "steps", "n_envs", "seed", "episodes", "replace"),
                         flags={"env_id": "--env"}, defaults={"env_id": DEFAULT_ENV}),
             *options_of(train_dagger, only=("rounds", "steps_per_round", "epochs", "final_epochs",
-                                            "validation_episodes", "learner_actions"),
+                                            "validation_episodes", "learner_actions", "frame_stack"),
                         helps={k: "DAgger: " + v for k, v in param_help(train_dagger).items()}),
             *options_of(list_priors, only=("zoo",))]
 
@@ -194,7 +194,7 @@ def train(**options) -> None:
 
         goal, method, zoo = options.pop("goal"), options.pop("method"), options.pop("zoo")
         dagger = {k: options.pop(k) for k in ("rounds", "steps_per_round", "epochs", "final_epochs",
-                                              "validation_episodes", "learner_actions")}
+                                              "validation_episodes", "learner_actions", "frame_stack")}
         with _progress() as progress:
             task = progress.add_task(f"{method} {goal}", total=dagger["rounds"] if method == "dagger" else 1)
             entry, evaluations = make_prior(_zoo(zoo), goal, method=method, command=command_line(),

@@ -196,3 +196,32 @@ def test_dagger_keeps_the_best_validated_round(monkeypatch):
     assert not all(th.equal(kept[k], snapshots[2][k]) for k in kept)  # the last round's policy differs
     assert all(th.equal(v, model.policy.average_net.state_dict()[k]) for k, v in kept.items())
     assert np.isfinite(record["final_loss"])
+
+
+def test_dagger_with_memory_fits_the_stacks_the_learner_saw(monkeypatch):
+    """With ``frame_stack`` k, every label is fitted on the last k observations (zeros before an episode's start)."""
+    import numpy as np
+
+    from sb3_disagree.priors import make as prior_training
+
+    fitted = {}
+    real_fit = prior_training._fit
+
+    def spy_fit(policy, optimizer, x, y, *args):
+        fitted["x"], fitted["y"] = x.copy(), y.copy()
+        return real_fit(policy, optimizer, x, y, *args)
+
+    monkeypatch.setattr(prior_training, "_fit", spy_fit)
+    env = _state_env("toilet")
+    model, record = prior_training.train_dagger(env, seed=0, rounds=2, steps_per_round=40, epochs=1, frame_stack=3)
+    d = env.observation_space.shape[0]
+    x = fitted["x"]
+    assert x.shape == (80, 3 * d) and record["frame_stack"] == 3 and model.policy.frame_stack == 3
+    n = env.num_envs
+    assert np.all(x[:n, : 2 * d] == 0) and np.any(x[:n, 2 * d :] != 0)  # the first stacks: only the reset frame
+    # Within an episode each stack is the previous one shifted by a frame (the second step of every env).
+    assert np.array_equal(x[n : 2 * n, d : 2 * d], x[:n, 2 * d :]) and np.all(x[n : 2 * n, :d] == 0)
+    # The saved policy carries its stack through predict's state, as SB3's evaluate_policy passes it.
+    obs = env.reset()
+    actions, state = model.predict(obs, state=None, episode_start=np.ones(n, dtype=bool), deterministic=True)
+    assert actions.shape == (n,) and state[0].shape == (n, 3 * d)

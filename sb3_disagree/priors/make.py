@@ -17,6 +17,7 @@ from stable_baselines3.common.preprocessing import is_image_space
 from stable_baselines3.common.vec_env import VecEnv
 
 from sb3_disagree.acer import ACER
+from sb3_disagree.acer.memory import push_frames
 from sb3_disagree.defaults import PRIOR_VALIDATION_SEED
 from sb3_disagree.envs.vec import make_vec
 from sb3_disagree.evaluation import Evaluation, evaluate
@@ -44,6 +45,7 @@ def train_dagger(
     validation_episodes: int = 0,
     validation_seed: int = PRIOR_VALIDATION_SEED,
     learner_actions: str = "sampled",
+    frame_stack: int = 1,
     progress: Optional[Callable[[str], None]] = None,
 ) -> tuple[ACER, dict[str, Any]]:
     """
@@ -69,6 +71,8 @@ def train_dagger(
     :param learner_actions: How the learner acts in the rounds it leads: "sampled", or "greedy" (its argmax, as
         SB3's ``evaluate_policy`` acts), so that the states where a greedy policy gets stuck (walking into a
         wall) are visited and labelled; validation then evaluates greedily too
+    :param frame_stack: Number of recent observations the policy sees (its memory, carried by ``predict``'s
+        ``state``); the labels are fitted on the stacks the learner saw
     :param progress: Called with a line of text after each round
     :return: An ACER model whose policy imitates the expert, and a record of the training
     """
@@ -76,7 +80,7 @@ def train_dagger(
         raise ValueError(f"learner_actions must be 'sampled' or 'greedy', got {learner_actions!r}")
     greedy = learner_actions == "greedy"
     name = policy_name(env)
-    model = ACER(name, env, seed=seed, policy_kwargs=PRIOR_POLICY_KWARGS[name])
+    model = ACER(name, env, seed=seed, policy_kwargs=dict(PRIOR_POLICY_KWARGS[name], frame_stack=frame_stack))
     env = model.get_env()  # as the policy sees it (channel-first images)
     policy = model.policy
     optimizer = th.optim.Adam(policy.net.parameters(), lr=learning_rate)
@@ -84,6 +88,7 @@ def train_dagger(
     data_obs: list[np.ndarray] = []
     data_act: list[np.ndarray] = []
     obs = env.reset()
+    stack = push_frames(None, obs, None, frame_stack)  # what the learner sees: obs itself without memory
     ep_len = np.zeros(env.num_envs, dtype=int)
     start = time.perf_counter()
     validation: list[float] = []
@@ -93,18 +98,21 @@ def train_dagger(
         collected = 0
         while collected < steps_per_round:
             labels = np.asarray(env.env_method("expert_action"), dtype=np.int64)
-            data_obs.append(obs.copy())
+            data_obs.append(stack.copy())
             data_act.append(labels)
             if r == 0:
                 actions = labels
             else:
-                learner, _ = model.predict(obs, deterministic=greedy)
-                actions = np.where(rng.random(env.num_envs) < beta, labels, learner)
+                with th.no_grad():
+                    learner = policy._predict(th.as_tensor(stack, device=policy.device), deterministic=greedy)
+                actions = np.where(rng.random(env.num_envs) < beta, labels, learner.cpu().numpy())
             obs, _, dones, _ = env.step(actions)
             ep_len = np.where(dones, 0, ep_len + 1)
             if (ep_len >= max_episode_steps).any():
                 obs = env.reset()
                 ep_len[:] = 0
+                dones = np.ones(env.num_envs, dtype=bool)
+            stack = push_frames(stack, obs, dones, frame_stack)
             collected += env.num_envs
         x = np.concatenate(data_obs)
         y = np.concatenate(data_act)
@@ -119,7 +127,7 @@ def train_dagger(
         if progress:
             progress(line)
     record = {"method": "dagger", "steps": int(len(y)), "seed": seed, "rounds": rounds, "epochs": epochs,
-              "final_epochs": final_epochs, "learner_actions": learner_actions}
+              "final_epochs": final_epochs, "learner_actions": learner_actions, "frame_stack": frame_stack}
     if validation:
         selected = int(np.flatnonzero(np.asarray(validation) == max(validation))[-1])
         policy.net.load_state_dict(best)
