@@ -134,7 +134,8 @@ def test_a_policy_started_from_a_prior_acts_as_the_prior_whatever_its_older_fram
     env = make_vec_env(env_class, n_envs=2, seed=0)
     prior = ACER(policy, env, n_steps=4, seed=1)
     prior.learn(64)  # weights away from their initialisation
-    model = ACER(policy, env, seed=2, policy_kwargs=dict(frame_stack=3, **transfer_kwargs(prior.policy)))
+    model = ACER(policy, env, seed=2, policy_kwargs=dict(transfer_kwargs(prior.policy), frame_stack=3))
+    assert transfer_kwargs(model.policy)["frame_stack"] == 3  # a prior with memory passes it on to a fine-tuned policy
     copied = load_prior_weights(model.policy, prior.policy)
     assert copied and not any(name.startswith("q_net") for name in copied)
     obs = th.as_tensor(prior.policy.obs_to_tensor(np.stack([env.observation_space.sample() for _ in range(5)]))[0])
@@ -150,3 +151,24 @@ def test_a_policy_started_from_a_prior_acts_as_the_prior_whatever_its_older_fram
         assert th.allclose(model.policy.average_logits(stacked), prior_logits, atol=1e-5)
         # The Q head is the new policy's own.
         assert not th.allclose(model.policy.net.q_net.weight, prior.policy.net.q_net.weight)
+
+
+def test_a_prior_with_memory_gets_its_own_stack_as_its_predict_would_build_it():
+    """PriorSet keeps a stack per prior with memory (cleared at episode starts), the others see single frames."""
+    from sb3_disagree.options.priors import PriorSet
+
+    env = make_vec_env(CueEnv, n_envs=2, seed=0)
+    stacked = ACER("MlpPolicy", env, policy_kwargs=dict(frame_stack=3), seed=1)
+    single = ACER("MlpPolicy", env, seed=2)
+    priors = PriorSet([stacked, single])
+    frames = [np.eye(3, dtype=np.float32)[[i % 3, (i + 1) % 3]] for i in range(5)]
+    starts = [np.ones(2, bool), np.zeros(2, bool), np.array([False, True]), np.zeros(2, bool), np.zeros(2, bool)]
+    state = None
+    for i, (obs, start) in enumerate(zip(frames, starts)):
+        got = priors.probs(obs, start)
+        if i == 2:  # env 1 restarted: only its new frame; env 0 holds its last three
+            assert not priors._stacks[0][1, :6].any() and np.array_equal(priors._stacks[0][0, :3], frames[0][0])
+        _, state = stacked.predict(obs, state=state, episode_start=start)
+        want = stacked.policy.get_distribution(th.as_tensor(state[0])).distribution.probs
+        assert th.allclose(got[0], want)
+        assert th.allclose(got[1], single.policy.get_distribution(th.as_tensor(obs)).distribution.probs)

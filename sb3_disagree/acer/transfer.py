@@ -9,13 +9,14 @@ from sb3_disagree.acer.policies import ACERPolicy
 
 def transfer_kwargs(prior_policy: Any) -> dict[str, Any]:
     """
-    The policy keyword arguments that give a new ACER policy the prior's architecture.
+    The policy keyword arguments that give a new ACER policy the prior's architecture, its memory included.
 
     :param prior_policy: An ACER policy (what the zoo's priors are)
     """
     if not isinstance(prior_policy, ACERPolicy):
         raise ValueError(f"fine-tuning starts from an ACER prior; this prior's policy is {type(prior_policy).__name__}")
-    return dict(net_arch=prior_policy.net_arch, features_extractor_kwargs=dict(prior_policy.features_extractor_kwargs))
+    return dict(net_arch=prior_policy.net_arch, features_extractor_kwargs=dict(prior_policy.features_extractor_kwargs),
+                frame_stack=prior_policy.frame_stack)
 
 
 @th.no_grad()

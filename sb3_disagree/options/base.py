@@ -50,7 +50,7 @@ class OptionsBehaviour(BehaviourPolicy):
         h = entropy(probs)
         h_np = h.cpu().numpy()
         branch = self.rng.random(len(h_np)) < h_np - self.entropy_offset
-        prior_probs = self.priors.probs(observations).to(probs.device)
+        prior_probs = self.priors.probs(observations, episode_starts).to(probs.device)
         gate = self._gate(observations, prior_probs, infos, np.asarray(episode_starts, dtype=bool), branch)
         follow = branch & gate
         mix = prior_probs.mean(0)

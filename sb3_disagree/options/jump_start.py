@@ -68,7 +68,7 @@ class JumpStart(BehaviourPolicy):
         self._advance()
         self.t[starts] = 0
         guide = self.t < self.h
-        mix = self.priors.probs(observations).to(probs.device).mean(0)
+        mix = self.priors.probs(observations, episode_starts).to(probs.device).mean(0)
         mu = th.where(th.as_tensor(guide, device=probs.device).unsqueeze(-1), mix, probs)
         actions = th.multinomial(mu, 1).squeeze(-1)
         self.t += 1

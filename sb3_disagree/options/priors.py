@@ -1,15 +1,20 @@
 """Frozen prior policies queried together: one forward pass per prior for the whole batch of envs."""
 
 from collections.abc import Sequence
-from typing import Any
+from typing import Any, Optional
 
+import numpy as np
 import torch as th
 from stable_baselines3.common.base_class import BaseAlgorithm
+
+from sb3_disagree.acer.memory import push_frames
 
 
 class PriorSet:
     """
-    The action distributions of k frozen priors for a batch of observations.
+    The action distributions of k frozen priors for a batch of observations. A prior with memory (an ACER
+    policy with ``frame_stack > 1``) gets the stack of its own recent observations, kept here between calls,
+    whatever the new policy sees; the others get the current observation.
 
     :param priors: SB3 models whose policies have ``get_distribution`` (ACER, PPO, A2C, ...)
     """
@@ -25,6 +30,8 @@ class PriorSet:
         # prior whose space equals its own (decided once here, not per step).
         spaces = [p.policy.observation_space for p in self.priors]
         self._converter = [next(j for j in range(i + 1) if spaces[j] == spaces[i]) for i in range(len(spaces))]
+        self._memory = [getattr(p.policy, "frame_stack", 1) for p in self.priors]
+        self._stacks: list[Optional[np.ndarray]] = [None] * len(self.priors)
 
     def __len__(self) -> int:
         return len(self.priors)
@@ -37,15 +44,23 @@ class PriorSet:
         return self
 
     @th.no_grad()
-    def probs(self, observations: Any) -> th.Tensor:
+    def probs(self, observations: Any, episode_starts: Optional[np.ndarray] = None) -> th.Tensor:
         """
-        :param observations: A batch of observations as the VecEnv gives them
+        :param observations: A batch of observations as the VecEnv gives them, one call per env step
+        :param episode_starts: True where the observation is the first of an episode (clears the stacks of the
+            priors with memory); None: only the first call starts them
         :return: pi_i(.|s) for every prior, shape (k, n_envs, n_actions)
         """
         out, converted = [], {}
-        for prior, j in zip(self.priors, self._converter):
+        for i, (prior, j) in enumerate(zip(self.priors, self._converter)):
             if j not in converted:
                 converted[j] = prior.policy.obs_to_tensor(observations)[0]
-            obs = converted[j].to(prior.policy.device)
-            out.append(prior.policy.get_distribution(obs).distribution.probs)
+            obs = converted[j]
+            if self._memory[i] > 1:
+                stack = self._stacks[i]
+                fresh = stack is None or stack.shape[0] != obs.shape[0]
+                self._stacks[i] = push_frames(None if fresh else stack, obs.cpu().numpy(),
+                                              None if fresh else episode_starts, self._memory[i])
+                obs = th.as_tensor(self._stacks[i])
+            out.append(prior.policy.get_distribution(obs.to(prior.policy.device)).distribution.probs)
         return th.stack(out)

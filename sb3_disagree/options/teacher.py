@@ -26,7 +26,7 @@ class PriorTeacher(BehaviourPolicy):
 
     def __call__(self, observations: Any, probs: th.Tensor, infos: list[dict[str, Any]],
                  episode_starts: np.ndarray) -> BehaviourStep:
-        teacher = self.priors.probs(observations).to(probs.device).mean(0)
+        teacher = self.priors.probs(observations, episode_starts).to(probs.device).mean(0)
         actions = th.multinomial(probs, 1).squeeze(-1)
         return BehaviourStep(actions, probs, np.full(len(probs), EXPLORE), teacher=teacher,
                              followed=np.zeros(len(probs), np.float32))
