@@ -89,7 +89,7 @@ def _zoo_table(entries: list, goal: Optional[str], sims: dict[str, float], chose
     table.add_column("goal", no_wrap=True)
     if len(envs) > 1:
         table.add_column("env", overflow="fold")
-    for col in ["algorithm", "method", "steps", "success greedy", "success sampled",
+    for col in ["algorithm", "method", "steps", "frames", "success greedy", "success sampled",
                 *(["similarity", ""] if goal else []), "status"]:
         table.add_column(col, no_wrap=col in ("similarity", ""))
     for e in entries:
@@ -98,6 +98,7 @@ def _zoo_table(entries: list, goal: Optional[str], sims: dict[str, float], chose
                    ((card.evaluation_greedy, card.evaluation) if card else ({}, {}))]
         row = [e.goal, *([e.env_id] if len(envs) > 1 else []), card.sb3_class.rsplit(".", 1)[-1] if card else "?",
                str(card.training.get("method", "?")) if card else "?", str(card.training.get("steps", "?")) if card else "?",
+               str(card.training.get("frame_stack", 1)) if card else "?",  # the prior's memory, in observations
                *(f"{v:.2f}" if v is not None else "-" for v in success)]
         if goal:
             row += [f"{sims[e.goal]:.3f}" if e.goal in sims else "(goal)", "[bold green]chosen[/]" if e.goal in chosen else ""]

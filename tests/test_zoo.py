@@ -154,10 +154,13 @@ def test_cli_eval_record_rewrites_only_the_evaluation(zoo):
 def test_cli_train_dagger_tiny(tmp_path):
     result = runner.invoke(app, ["priors", "train", "--goal", "toilet", "--method", "dagger", "--env", STATE_ID,
                                  "--zoo", str(tmp_path), "--rounds", "2", "--steps-per-round", "200", "--epochs", "1",
-                                 "--episodes", "4", "--validation-episodes", "3"])
+                                 "--episodes", "4", "--validation-episodes", "3", "--frame-stack", "2"])
     assert result.exit_code == 0, result.output
     card = Zoo(tmp_path).get("toilet", STATE_ID).card
-    assert card.training["method"] == "dagger" and card.training["steps"] == 400
+    assert card.training["method"] == "dagger" and card.training["steps"] == 400 and card.training["frame_stack"] == 2
+    listed = runner.invoke(app, ["priors", "list", "--zoo", str(tmp_path)], env={"COLUMNS": "200"}).output
+    row = next(line for line in listed.splitlines() if "toilet" in line)
+    assert [c.strip() for c in row.split("│")][2:7] == ["ACER", "dagger", "400", "2", f"{card.evaluation_greedy['success_rate']:.2f}"]
     assert card.command.startswith("dopt ") and card.evaluation["episodes"] == 4
     # The kept policy is the last round with the best validation success.
     validation = card.training["validation_success"]

@@ -55,7 +55,7 @@ class RunConfig:
         cores). Off in the library and the experiments (the sequential loop their figures were made with); on in
         dopt train
     :param frame_stack: The new policy sees its last this many observations (its memory; 1: the current one);
-        the priors keep their single observation
+        each prior keeps the input it was trained on (its own stack if it has memory, else the observation)
     :param jsrl_horizon: Mode "jsrl": the guide's horizon at the start, in steps; 0 for the priors' mean
         episode length on their zoo cards
     :param init: "scratch" (a fresh network) or "prior" (the most similar prior's architecture and weights, as
