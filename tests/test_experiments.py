@@ -243,6 +243,11 @@ def test_continuing_an_experiment_extends_its_runs(zoo, tmp_path):
     other.write_text(yaml.safe_dump(spec))
     result = runner.invoke(app, ["experiment", "run", str(other), "--jobs", "1", "--out", str(results / "tiny-other")])
     assert result.exit_code == 2 and "trained with other n_envs" in result.output
+    # Any setting the continuation would silently not use counts, not only the method's own (here: evaluations).
+    spec.update(name="tiny-eval", cells={"scratch": {"mode": "scratch"}}, run={**spec["run"], "eval_every": 80})
+    other.write_text(yaml.safe_dump(spec))
+    result = runner.invoke(app, ["experiment", "run", str(other), "--jobs", "1", "--out", str(results / "tiny-eval")])
+    assert result.exit_code == 2 and "trained with other eval_every" in result.output
 
 
 def test_a_cell_same_as_another_experiments_run_is_copied_not_trained(zoo, tmp_path, monkeypatch):

@@ -22,7 +22,8 @@ Each cell's mapping overrides RunConfig fields (``mode``, ``alpha``, ``beta``, .
 ``continues: OTHER`` makes each run a continuation of OTHER's finished run of the same cell and seed (read
 from the results folder beside this one) to this experiment's larger ``steps``: longer budgets without
 repeating the first steps. The replay buffer is not kept at the end of a finished run, so a continuation
-starts with an empty one.
+starts with an empty one. A continuation trains with the saved settings of the run it continues, so a grid
+whose runs differ from them in anything but ``steps`` (and what only changes the output) is refused.
 
 A cell may say ``same_as: OTHER/CELL`` where its runs are, seed for seed, runs another experiment already
 makes with the same configuration (the ablations' defaults are Figure 3's runs): a finished run there is
@@ -45,8 +46,6 @@ SHIPPED = Path(__file__).resolve().parents[1] / "data" / "experiments"
 RESULT = "result.json"
 # RunConfig fields that change what a run writes, not what it learns: a copy (same_as) may differ in them.
 OUTPUT_ONLY = ("record_trajectories", "checkpoint_every")
-# What a continuation must share with the run it continues (everything but the budget).
-SAME = ("goal", "env_id", "mode", "alpha", "beta", "seed", "n_envs", "acer_kwargs")
 
 
 @dataclass
@@ -75,7 +74,9 @@ class Run:
             raise FileNotFoundError(f"{self.cell} seed {self.seed} continues {source}, which is not a finished run "
                                     f"with its model; run first: dopt experiment run {continues}")
         saved, wanted = yaml.safe_load((source / "config.yaml").read_text()), asdict(self.config)
-        differ = [k for k in SAME if saved.get(k) != wanted[k]]
+        # The continuation trains with the saved settings, so a grid that asks for others would be ignored.
+        defaults = {k: f.default for k, f in RunConfig.__dataclass_fields__.items() if f.default is not MISSING}
+        differ = [k for k in wanted if k not in ("steps", *OUTPUT_ONLY) and saved.get(k, defaults.get(k)) != wanted[k]]
         if differ:
             raise ValueError(f"{source} was trained with other {', '.join(differ)} than {self.cell} seed {self.seed}")
         return source
