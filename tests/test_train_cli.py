@@ -228,6 +228,11 @@ def test_unknown_goal_word_and_too_few_priors(zoo, tmp_path):
     assert result.exit_code == 2 and "2 priors are needed" in result.output
     result = runner.invoke(app, ["train", "--goal", "bathtub", "--resume", str(tmp_path / "nothing")])
     assert result.exit_code == 2 and "not a run folder" in result.output
+    out = tmp_path / "out-missing-zoo"
+    result = runner.invoke(app, ["train", "--goal", "bathtub", "--env", STATE_ID, "--zoo", str(tmp_path / "no-zoo"),
+                                 "--out", str(out)])
+    assert result.exit_code == 2 and "no-zoo does not exist" in " ".join(result.output.split()), result.output
+    assert not out.exists() and not (tmp_path / "no-zoo").exists()  # nothing written, no zoo made up
 
 
 def test_the_ppo_modes_settings_are_the_published_hyperparameters_file():

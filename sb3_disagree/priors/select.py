@@ -30,6 +30,8 @@ def choose_priors(goal: str, env_id: str, env: Any, priors: Union[str, Sequence[
     :return: The priors' goals, their similarities to ``goal`` and the loaded SB3 models
     """
     zoo_ = Zoo(zoo)
+    if not zoo_.root.is_dir():  # a zoo made by commands first (docs/zoo.md), not made yet here
+        raise ZooError(f"the zoo {zoo_.root} does not exist; make it first (dopt priors train --zoo {zoo_.root} ...)")
     labels = zoo_.labels(env_id, env.observation_space, env.action_space)
     if priors == "auto":
         chosen = select_priors(goal, labels, load_embedding(embedding), k=k)
