@@ -48,6 +48,14 @@ RESULT = "result.json"
 OUTPUT_ONLY = ("record_trajectories", "checkpoint_every")
 
 
+def _differing(saved: dict[str, Any], config: RunConfig, ignore: tuple[str, ...] = ()) -> list[str]:
+    """The RunConfig fields in which a saved run's settings differ from ``config`` (a field newer than the
+    record ran at its default), leaving out ``ignore`` and what only changes the output."""
+    defaults = {k: f.default for k, f in RunConfig.__dataclass_fields__.items() if f.default is not MISSING}
+    wanted = asdict(config)
+    return [k for k in wanted if k not in (*ignore, *OUTPUT_ONLY) and saved.get(k, defaults.get(k)) != wanted[k]]
+
+
 @dataclass
 class Run:
     """One cell and seed of an experiment, with the configuration it trains."""
@@ -73,10 +81,8 @@ class Run:
         if not (source / RESULT).exists() or not (source / "model.zip").exists():
             raise FileNotFoundError(f"{self.cell} seed {self.seed} continues {source}, which is not a finished run "
                                     f"with its model; run first: dopt experiment run {continues}")
-        saved, wanted = yaml.safe_load((source / "config.yaml").read_text()), asdict(self.config)
         # The continuation trains with the saved settings, so a grid that asks for others would be ignored.
-        defaults = {k: f.default for k, f in RunConfig.__dataclass_fields__.items() if f.default is not MISSING}
-        differ = [k for k in wanted if k not in ("steps", *OUTPUT_ONLY) and saved.get(k, defaults.get(k)) != wanted[k]]
+        differ = _differing(yaml.safe_load((source / "config.yaml").read_text()), self.config, ignore=("steps",))
         if differ:
             raise ValueError(f"{source} was trained with other {', '.join(differ)} than {self.cell} seed {self.seed}")
         return source
@@ -91,11 +97,7 @@ class Run:
         if not (source / RESULT).exists():
             return None
         result = json.loads((source / RESULT).read_text())
-        saved, wanted = result.get("config", {}), asdict(self.config)
-        # A field newer than the record ran at its default.
-        defaults = {k: f.default for k, f in RunConfig.__dataclass_fields__.items() if f.default is not MISSING}
-        # What a run writes on the side or how often it saves changes nothing it learns.
-        differ = [k for k in wanted if k not in OUTPUT_ONLY and saved.get(k, defaults.get(k)) != wanted[k]]
+        differ = _differing(result.get("config", {}), self.config)
         if result.get("final_alone", {}).get("episodes") != self.final_episodes:
             differ.append("final_episodes")
         if differ:
