@@ -42,6 +42,13 @@ def _seeds(text: Optional[str]) -> Optional[list[int]]:
         raise ValueError(f"--seeds takes whole numbers separated by commas, got {text!r}") from None
 
 
+CELLS_OPT = typer.Option(None, "--cells", help="Only these cells: a,b")
+
+
+def _cells(text: Optional[str]) -> Optional[list[str]]:
+    return [c.strip() for c in text.split(",") if c.strip()] if text else None
+
+
 @app.command("run")
 def run(
     name: str = typer.Argument(..., help="A shipped experiment's name, or a YAML file."),
@@ -49,7 +56,7 @@ def run(
     jobs: Optional[int] = typer.Option(None, "--jobs", help="Runs at a time on the local backend (default: cores)."),
     address: Optional[str] = typer.Option(None, "--address", help="Ray cluster address (default: a local Ray)."),
     seeds: Optional[str] = SEEDS_OPT,
-    cells: Optional[str] = typer.Option(None, "--cells", help="Only these cells: a,b"),
+    cells: Optional[str] = CELLS_OPT,
     out: Optional[Path] = OUT_OPT,
 ) -> None:
     """Run every cell and seed of an experiment; finished runs are skipped."""
@@ -58,8 +65,7 @@ def run(
         from sb3_disagree.experiments.spec import load_experiment
 
         experiment = load_experiment(name)
-        experiment.restrict(seeds=_seeds(seeds),
-                            cells=[c.strip() for c in cells.split(",")] if cells else None)
+        experiment.restrict(seeds=_seeds(seeds), cells=_cells(cells))
         root = _root(experiment.name, out)
         runs = experiment.runs()
         todo = [r for r in runs if not r.finished(root)]
@@ -88,6 +94,10 @@ def report(
     note: str = typer.Option("", "--note", help="What else ran on the machine meanwhile, said beside the machine."),
     section: Optional[Path] = typer.Option(None, "--section", help="Also write the report into this markdown page, "
                                            "between its <!-- NAME:start --> and <!-- NAME:end --> lines."),
+    cells: Optional[str] = CELLS_OPT,
+    title: Optional[str] = typer.Option(None, "--name", help="The report's own name, for a report on some cells "
+                                        "beside the full one: NAME.md, NAME.png and the page's NAME block "
+                                        "(default: the experiment's name and report.md)."),
 ) -> None:
     """Curves (mean and 95% band over seeds) and the table; writes report.md and a PNG in the results folder.
     ``--seeds`` compares cells on the seeds they share where some have more finished than others."""
@@ -95,9 +105,11 @@ def report(
         from sb3_disagree.experiments.spec import load_experiment
         from sb3_disagree.experiments.writeup import write_report
 
-        experiment, only = load_experiment(name), _seeds(seeds)
-        experiment.restrict(seeds=only)
+        experiment, only, chosen = load_experiment(name), _seeds(seeds), _cells(cells)
+        experiment.restrict(seeds=only, cells=chosen)
         root = _root(experiment.name, out)
-        console.print(write_report(experiment, root, figure, note, section, only))
-        console.print(f"wrote {root / 'report.md'} and {root / (experiment.name + '.png')}"
-                      + (f"; the section {experiment.name} of {section}" if section else ""))
+        console.print(write_report(experiment, root, figure, note, section, only, chosen, title))
+        title = title or experiment.name
+        markdown = "report.md" if title == experiment.name else f"{title}.md"
+        console.print(f"wrote {root / markdown} and {root / (title + '.png')}"
+                      + (f"; the section {title} of {section}" if section else ""))

@@ -85,6 +85,21 @@ def test_run_report_and_skip_finished(zoo, tmp_path):
     assert runner.invoke(app, ["experiment", "report", str(path), "--out", str(out), "--seeds", "0"]).exit_code == 0
     report = runner.invoke(app, ["experiment", "report", str(path), "--out", str(out), "--seeds", "1"])
     assert report.exit_code == 2 and "not among" in report.output
+    # A second report on some cells, under its own name, beside the full one and its page block.
+    full = (out / "report.md").read_text()
+    args = ["experiment", "report", str(path), "--out", str(out), "--cells", "scratch,beta-big", "--section", str(page)]
+    named = runner.invoke(app, args + ["--name", "tiny-two"])
+    assert named.exit_code == 0, named.output
+    two = (out / "tiny-two.md").read_text()
+    assert "| scratch | 1 |" in two and "| beta-big | 1 |" in two and "| disagreement |" not in two
+    assert "--cells scratch,beta-big --name tiny-two" in two and "--jobs" not in two
+    assert (out / "tiny-two.png").stat().st_size > 0 and (out / "report.md").read_text() == full
+    text = page.read_text()
+    assert text.count("<!-- tiny:start -->") == 1 and text.count("<!-- tiny-two:start -->") == 1
+    for bad, message in ((["--name", "../x"], "a report's name"), (["--cells", "nope"], "not among")):
+        refused = runner.invoke(app, args[:5] + bad)
+        assert refused.exit_code == 2 and message in refused.output, refused.output
+    assert not (tmp_path / "x.md").exists()
 
 
 def test_runs_go_under_runs_experiments_by_default(zoo, tmp_path, monkeypatch):

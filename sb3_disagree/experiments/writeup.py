@@ -8,6 +8,7 @@ runs' per-episode monitor files are gone (they are not committed).
 
 import os
 import platform
+import re
 from pathlib import Path
 from typing import Optional
 
@@ -37,46 +38,57 @@ def write_section(page: Path, name: str, title: str, body: str) -> None:
 
 
 def write_report(experiment: Experiment, root: Path, figure: Optional[Path] = None, note: str = "",
-                 section: Optional[Path] = None, seeds: Optional[list[int]] = None) -> str:
+                 section: Optional[Path] = None, seeds: Optional[list[int]] = None,
+                 cells: Optional[list[str]] = None, name: Optional[str] = None) -> str:
     """
     Write an experiment's figure and ``report.md`` into its results folder, and optionally its section of a page.
 
-    :param experiment: The experiment (restricted to the seeds to report, if any)
+    :param experiment: The experiment (restricted to the seeds and cells to report, if any)
     :param root: Its results folder
     :param figure: Also write the figure here (the page links this one)
     :param note: What else ran on the machine meanwhile, said beside the machine
     :param section: A markdown page whose ``<!-- NAME:start/end -->`` block gets the write-up
     :param seeds: The ``--seeds`` the report was restricted to (said in the command)
+    :param cells: The ``--cells`` the report was restricted to (said in the command)
+    :param name: The report's own name, for a second report on some of the cells beside the full one: its
+        figure ``NAME.png``, its markdown ``NAME.md`` and its page block (default: the experiment's name, its
+        ``report.md``)
     :return: The markdown written
     """
+    name = name or experiment.name
+    if not re.fullmatch(r"[A-Za-z0-9][A-Za-z0-9_.-]*", name):
+        raise ValueError(f"a report's name is letters, digits, '-', '_' and '.', got {name!r}")
     grid, summaries = summarize(experiment, root)
     if not summaries:
         raise FileNotFoundError(f"no finished runs of {experiment.name} in {root}; run: dopt experiment run "
                                 f"{experiment.name} --out {root}")
     write_training_curves(root, grid, {(s.cell, seed): c for s in summaries for seed, c in zip(s.seeds, s.seed_curves)})
-    png = root / f"{experiment.name}.png"
+    png = root / f"{name}.png"
     plot(experiment, grid, summaries, png, root)
     if figure is not None:
         figure.parent.mkdir(parents=True, exist_ok=True)
         figure.write_bytes(png.read_bytes())
-    command = _command(experiment, root, figure, section, seeds, summaries)
-    (root / "report.md").write_text(f"# {experiment.name}\n\n" + _body(experiment, grid, summaries, png.name, note,
-                                                                    command) + "\n")
+    command = _command(experiment, root, figure, section, seeds, cells, name, summaries)
+    markdown = root / ("report.md" if name == experiment.name else f"{name}.md")
+    markdown.write_text(f"# {name}\n\n" + _body(experiment, grid, summaries, png.name, note, command) + "\n")
     if section is None:
-        return (root / "report.md").read_text()
+        return markdown.read_text()
     link = os.path.relpath(figure or png, Path(section).parent)
     body = _body(experiment, grid, summaries, link, note, command)
-    write_section(section, experiment.name, f"{experiment.name}: {experiment.goal}", body)
+    write_section(section, name, f"{name}: {experiment.goal}", body)
     return body
 
 
 def _command(experiment: Experiment, root: Path, figure: Optional[Path], section: Optional[Path],
-             seeds: Optional[list[int]], summaries: list) -> str:
+             seeds: Optional[list[int]], cells: Optional[list[str]], name: str, summaries: list) -> str:
     ran = sorted({s for c in summaries for s in c.seeds})
+    only = f" --cells {','.join(cells)}" if cells else ""
     report = (f"dopt experiment report {experiment.name} --out {root}"
-              + (f" --seeds {','.join(map(str, seeds))}" if seeds else "")
+              + (f" --seeds {','.join(map(str, seeds))}" if seeds else "") + only
+              + (f" --name {name}" if name != experiment.name else "")
               + (f" --figure {figure}" if figure else "") + (f" --section {section}" if section else ""))
-    return (f"`dopt experiment run {experiment.name} --jobs 2 --seeds {','.join(map(str, ran))} --out {root}` then "
+    # How many runs went at a time is the machine's business (said beside it), not the command's.
+    return (f"`dopt experiment run {experiment.name} --seeds {','.join(map(str, ran))}{only} --out {root}` then "
             f"`{report}`")
 
 
