@@ -184,3 +184,36 @@ def test_reward_scale_enters_the_targets_and_q_loss_is_as_named(monkeypatch, sca
 def test_unknown_q_loss_is_refused():
     with pytest.raises(ValueError, match="q_loss"):
         ACER("MlpPolicy", make_vec_env(lambda: ChainEnv(length=3), n_envs=1), q_loss="l1")
+
+
+def test_buffer_stores_frame_stacks_as_frames_and_rebuilds_them():
+    """With frame stacking, a segment is stored as its first stack and each later stack's newest frame; sampling
+    gives back exactly the stacks the rollout built, cleared where an episode ended, in a sixth of the memory."""
+    from sb3_disagree.acer.memory import push_frames
+
+    T, E, A, K, C = 20, 3, 3, 8, 2
+    rng = np.random.default_rng(0)
+    space = spaces.Box(0, 255, (K * C, 4, 5), np.uint8)
+    whole = SegmentReplayBuffer(T * E * 2, T, E, space, A)
+    frames = SegmentReplayBuffer(T * E * 2, T, E, space, A, frame_stack=K)
+    stack, kept = push_frames(None, rng.integers(0, 256, (E, C, 4, 5), dtype=np.uint8), None, K), []
+    for _ in range(2):
+        seg = _segment(T, E, A, 0)
+        seg.observations = np.zeros((T + 1, E, K * C, 4, 5), np.uint8)
+        seg.dones = (rng.random((T, E)) < 0.15).astype(np.float32)
+        for t in range(T + 1):  # as collect_rollouts builds them: the stack after step t-1's done flags
+            seg.observations[t] = stack
+            if t < T:
+                stack = push_frames(stack, rng.integers(0, 256, (E, C, 4, 5), dtype=np.uint8), seg.dones[t] > 0, K)
+        seg.actions[:] = len(kept)  # tells the stored segments apart
+        kept.append(seg)
+        whole.add(seg)
+        frames.add(seg)
+    assert frames.observations.nbytes + frames.first_stacks.nbytes < whole.observations.nbytes / 5
+    assert kept[0].dones.any() and (kept[0].observations[1:][kept[0].dones > 0][:, :-C] == 0).all()
+    for _ in range(10):
+        s = frames.sample(np.random.default_rng(_))
+        for e in range(E):
+            np.testing.assert_array_equal(s.observations[:, e], kept[s.actions[0, e]].observations[:, e])
+    with pytest.raises(ValueError, match="not stacks of 8 frames"):
+        SegmentReplayBuffer(T * E, T, E, spaces.Box(0, 255, (3, 4, 5), np.uint8), A, frame_stack=K)

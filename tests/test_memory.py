@@ -68,7 +68,7 @@ def test_the_behaviour_gets_single_frames_while_the_policy_sees_stacks():
     model = ACER("CnnPolicy", env, n_steps=3, replay_start=6, behaviour=recorder, policy_kwargs=dict(frame_stack=4))
     model.learn(12)
     assert recorder.shapes == {(2, 3, 40, 40)}  # channels first, one frame: what a prior was trained on
-    assert model.replay_buffer.observations.shape[-3:] == (12, 40, 40)
+    assert model.replay_buffer.sample().observations.shape[-3:] == (12, 40, 40)  # stored as frames, replayed as stacks
     assert model.policy.net.features_extractor.cnn[0].in_channels == 12
 
 

@@ -190,7 +190,8 @@ class ACER(BaseAlgorithm):
         )
         self.policy = self.policy.to(self.device)
         self.replay_buffer = SegmentReplayBuffer(
-            self.buffer_size, self.n_steps, self.n_envs, self.policy.net_observation_space, int(self.action_space.n)
+            self.buffer_size, self.n_steps, self.n_envs, self.policy.net_observation_space, int(self.action_space.n),
+            frame_stack=self.policy.frame_stack,
         )
         self._last_infos: list[dict[str, Any]] = [{} for _ in range(self.n_envs)]
         self._last_stack: Optional[np.ndarray] = None  # the policy's input: the last frame_stack observations
@@ -544,6 +545,8 @@ class ACER(BaseAlgorithm):
                 f"The replay buffer holds segments of (n_steps, n_envs, n_actions) = "
                 f"{(buffer.n_steps, buffer.n_envs, buffer.n_actions)}, the model expects {expected}"
             )
+        if not hasattr(buffer, "frame_stack"):  # saved before stacks were stored as frames: whole observations
+            buffer.frame_stack = 1
         if not hasattr(buffer, "teacher"):  # saved before the buffer kept a teacher: none
             buffer.teacher = np.zeros_like(buffer.mu)
             buffer.followed = np.zeros_like(buffer.rewards)

@@ -6,6 +6,8 @@ from typing import Optional
 import numpy as np
 from gymnasium import spaces
 
+from sb3_disagree.acer.memory import push_frames
+
 
 @dataclass
 class Segment:
@@ -47,8 +49,11 @@ class SegmentReplayBuffer:
         whole segments, at least one
     :param n_steps: Length of a segment
     :param n_envs: Number of parallel environments
-    :param observation_space: Observation space
+    :param observation_space: Observation space (of the policy's input: with frame stacking, the stacks)
     :param n_actions: Number of discrete actions
+    :param frame_stack: Frames per observation. With more than one, a segment's observations are stored as
+        its first stack and the newest frame of each later one (``T + K`` frames instead of ``(T + 1) K``),
+        and the stacks are rebuilt on sampling as the rollout built them, cleared where an episode ended
     """
 
     def __init__(
@@ -58,14 +63,23 @@ class SegmentReplayBuffer:
         n_envs: int,
         observation_space: spaces.Space,
         n_actions: int,
+        frame_stack: int = 1,
     ) -> None:
         self.n_steps = n_steps
         self.n_envs = n_envs
         self.n_actions = n_actions
+        self.frame_stack = frame_stack
         self.n_segments = max(1, buffer_size // (n_steps * n_envs))
         obs_shape = observation_space.shape if observation_space.shape is not None else ()
         s, t, e = self.n_segments, n_steps, n_envs
-        self.observations = np.zeros((s, t + 1, e, *obs_shape), dtype=observation_space.dtype)
+        if frame_stack > 1:
+            if not obs_shape or obs_shape[0] % frame_stack:
+                raise ValueError(f"observations of shape {obs_shape} are not stacks of {frame_stack} frames")
+            frame = (obs_shape[0] // frame_stack, *obs_shape[1:])
+            self.first_stacks = np.zeros((s, e, *obs_shape), dtype=observation_space.dtype)
+            self.observations = np.zeros((s, t, e, *frame), dtype=observation_space.dtype)  # newest frames
+        else:
+            self.observations = np.zeros((s, t + 1, e, *obs_shape), dtype=observation_space.dtype)
         self.actions = np.zeros((s, t, e), dtype=np.int64)
         self.rewards = np.zeros((s, t, e), dtype=np.float32)
         self.dones = np.zeros((s, t, e), dtype=np.float32)
@@ -93,7 +107,11 @@ class SegmentReplayBuffer:
         :param segment: Segments of shape (T, E, ...) matching this buffer
         """
         i = self.pos
-        self.observations[i] = segment.observations
+        if self.frame_stack > 1:
+            self.first_stacks[i] = segment.observations[0]
+            self.observations[i] = segment.observations[1:, :, -self.observations.shape[3]:]
+        else:
+            self.observations[i] = segment.observations
         self.actions[i] = segment.actions
         self.rewards[i] = segment.rewards
         self.dones[i] = segment.dones
@@ -116,12 +134,21 @@ class SegmentReplayBuffer:
         else:
             seg = rng.integers(0, self.n_stored, size=self.n_envs)
         env = np.arange(self.n_envs)
+        dones = self.dones[seg, :, env].T
         # Advanced indexing over (segment, env) pairs puts that axis first: move it back behind time.
+        if self.frame_stack > 1:
+            frames = np.moveaxis(self.observations[seg, :, env], 0, 1)
+            stacks = [self.first_stacks[seg, env]]
+            for t in range(self.n_steps):
+                stacks.append(push_frames(stacks[-1], frames[t], dones[t] > 0, self.frame_stack))
+            observations = np.stack(stacks)
+        else:
+            observations = np.moveaxis(self.observations[seg, :, env], 0, 1)
         return Segment(
-            observations=np.moveaxis(self.observations[seg, :, env], 0, 1),
+            observations=observations,
             actions=self.actions[seg, :, env].T,
             rewards=self.rewards[seg, :, env].T,
-            dones=self.dones[seg, :, env].T,
+            dones=dones,
             timeout_values=self.timeout_values[seg, :, env].T,
             mu=np.moveaxis(self.mu[seg, :, env], 0, 1),
             teacher=np.moveaxis(self.teacher[seg, :, env], 0, 1),
