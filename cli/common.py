@@ -1,6 +1,7 @@
 """What the ``dopt`` commands share: the console, clean failures, defaults."""
 
 import contextlib
+import os
 import sys
 from collections.abc import Iterator
 
@@ -12,7 +13,8 @@ from sb3_disagree.defaults import DEFAULT_ENV  # noqa: F401  (the one definition
 from sb3_disagree.priors.language import NotEnoughPriorsError, UnknownWordError
 from sb3_disagree.priors.zoo import ZooError
 
-console = Console()
+# Piped to a file or a log, a table keeps its columns whole instead of wrapping them at 80 characters.
+console = Console(width=None if sys.stdout.isatty() or "COLUMNS" in os.environ else 160)
 err_console = Console(stderr=True)
 # Errors a user can cause with their input: a message and exit code 2, never a traceback.
 USER_ERRORS = (ZooError, UnknownWordError, NotEnoughPriorsError, FileNotFoundError, KeyError, ValueError)
