@@ -21,6 +21,7 @@ from sb3_disagree import ACER
 from sb3_disagree.acer.memory import push_frames
 from sb3_disagree.defaults import FINAL_EVAL_SEED_OFFSET
 from sb3_disagree.envs.vec import make_vec
+from sb3_disagree.priors.make import _fit as fit_labels
 from sb3_disagree.run.evaluation import evaluate_alone
 
 COLLECT_SEED_OFFSET = 5_000  # training-side env seeds, apart from the run's own and its evaluations'
@@ -67,21 +68,11 @@ def fit(student: ACER, x: np.ndarray, y: np.ndarray, epochs: int, seed: int) -> 
     policy, rng = student.policy, np.random.default_rng(seed)
     optimizer = th.optim.Adam(policy.net.parameters(), lr=1e-3)
     schedule = th.optim.lr_scheduler.CosineAnnealingLR(optimizer, T_max=epochs)
-    policy.set_training_mode(True)
+    accuracy = 0.0
     for _ in range(epochs):
-        order, correct = rng.permutation(len(y)), 0
-        for i in range(0, len(y), 128):
-            idx = order[i:i + 128]
-            target = th.as_tensor(y[idx])
-            logits = policy.net.logits(policy.extract_features(th.as_tensor(x[idx]), policy.net.features_extractor))
-            loss = th.nn.functional.cross_entropy(logits, target)
-            optimizer.zero_grad()
-            loss.backward()
-            optimizer.step()
-            correct += int((logits.argmax(-1) == target).sum())
+        _, accuracy = fit_labels(policy, optimizer, x, y, 1, 128, rng)  # DAgger's own fitting step
         schedule.step()
-    policy.set_training_mode(False)
-    return correct / len(y)
+    return accuracy
 
 
 if __name__ == "__main__":
