@@ -172,3 +172,28 @@ def test_a_prior_with_memory_gets_its_own_stack_as_its_predict_would_build_it():
         want = stacked.policy.get_distribution(th.as_tensor(state[0])).distribution.probs
         assert th.allclose(got[0], want)
         assert th.allclose(got[1], single.policy.get_distribution(th.as_tensor(obs)).distribution.probs)
+
+
+def test_linked_frames_rebuild_the_stacks_push_frames_built():
+    """Frames linked to their predecessors give back, for any indices, the stacks built step by step along
+    interleaved episodes of several envs (zeros before each episode's start)."""
+    from sb3_disagree.acer.memory import LinkedFrames, push_frames
+
+    rng = np.random.default_rng(0)
+    n, k, steps = 3, 4, 30
+    stack, previous, frames, links, stacks = None, np.full(n, -1), [], [], []
+    starts = np.ones(n, dtype=bool)
+    for t in range(steps):
+        obs = rng.integers(1, 256, (n, 2, 3, 3), dtype=np.uint8)
+        stack = push_frames(stack, obs, starts, k)
+        here = t * n + np.arange(n)
+        frames.append(obs)
+        links.append(np.where(starts, -1, previous))
+        stacks.append(stack)
+        previous = here
+        starts = rng.random(n) < 0.2
+    held = LinkedFrames(np.concatenate(frames), np.concatenate(links), k)
+    expected = np.concatenate(stacks)
+    idx = rng.permutation(len(held))[:40]
+    np.testing.assert_array_equal(held[idx], expected[idx])
+    assert (expected[:n, : (k - 1) * 2] == 0).all() and len(held) == steps * n

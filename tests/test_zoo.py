@@ -211,7 +211,7 @@ def test_dagger_with_memory_fits_the_stacks_the_learner_saw(monkeypatch):
     real_fit = prior_training._fit
 
     def spy_fit(policy, optimizer, x, y, *args):
-        fitted["x"], fitted["y"] = x.copy(), y.copy()
+        fitted["x"], fitted["y"] = x[np.arange(len(y))], y.copy()  # the stacks, rebuilt from linked frames
         return real_fit(policy, optimizer, x, y, *args)
 
     monkeypatch.setattr(prior_training, "_fit", spy_fit)

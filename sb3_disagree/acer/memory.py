@@ -50,3 +50,32 @@ def push_frames(stack: Optional[np.ndarray], obs: np.ndarray, episode_starts: Op
         new[np.asarray(episode_starts, dtype=bool), : (k - 1) * c] = 0
     new[:, (k - 1) * c :] = obs
     return new
+
+
+class LinkedFrames:
+    """
+    Many stacks held as single frames: each frame links to the frame before it in its env's episode (-1 at
+    an episode's start), and ``frames[idx]`` rebuilds the stacks of those frames as :func:`push_frames` built
+    them along the way, in ``1 / k`` of the memory the stacks would take.
+
+    :param frames: The frames, shape (n, c, ...)
+    :param previous: For each frame the index of the one before it in the same episode, or -1; shape (n,)
+    :param k: Number of frames in a stack
+    """
+
+    def __init__(self, frames: np.ndarray, previous: np.ndarray, k: int) -> None:
+        self.frames, self.previous, self.k = frames, previous, k
+
+    def __len__(self) -> int:
+        return len(self.frames)
+
+    def __getitem__(self, idx: np.ndarray) -> np.ndarray:
+        idx = np.asarray(idx)
+        c = self.frames.shape[1]
+        out = np.zeros((len(idx), self.k * c, *self.frames.shape[2:]), dtype=self.frames.dtype)
+        current = idx.copy()
+        for j in range(self.k - 1, -1, -1):  # newest frame last, walking back through the episode
+            held = current >= 0
+            out[held, j * c:(j + 1) * c] = self.frames[current[held]]
+            current = np.where(held, self.previous[np.maximum(current, 0)], -1)
+        return out

@@ -8,7 +8,7 @@ its current state (the apartment does); DAgger needs nothing else.
 
 import time
 from collections.abc import Callable
-from typing import Any, Optional
+from typing import Any, Optional, Union
 
 import numpy as np
 import torch as th
@@ -17,7 +17,7 @@ from stable_baselines3.common.preprocessing import is_image_space
 from stable_baselines3.common.vec_env import VecEnv
 
 from sb3_disagree.acer import ACER
-from sb3_disagree.acer.memory import push_frames
+from sb3_disagree.acer.memory import LinkedFrames, push_frames
 from sb3_disagree.defaults import PRIOR_VALIDATION_SEED
 from sb3_disagree.envs.vec import make_vec
 from sb3_disagree.evaluation import Evaluation, evaluate
@@ -85,8 +85,12 @@ def train_dagger(
     policy = model.policy
     optimizer = th.optim.Adam(policy.net.parameters(), lr=learning_rate)
     rng = np.random.default_rng(seed)
+    # Labels are kept with single frames linked to their predecessors, and the stacks rebuilt per minibatch:
+    # k-frame stacks of 60x80 images would take k times the memory (tens of GB over many rounds).
     data_obs: list[np.ndarray] = []
+    data_prev: list[np.ndarray] = []
     data_act: list[np.ndarray] = []
+    previous = np.full(env.num_envs, -1)
     obs = env.reset()
     stack = push_frames(None, obs, None, frame_stack)  # what the learner sees: obs itself without memory
     ep_len = np.zeros(env.num_envs, dtype=int)
@@ -98,7 +102,9 @@ def train_dagger(
         collected = 0
         while collected < steps_per_round:
             labels = np.asarray(env.env_method("expert_action"), dtype=np.int64)
-            data_obs.append(stack.copy())
+            here = len(data_obs) * env.num_envs + np.arange(env.num_envs)
+            data_obs.append(np.array(obs))
+            data_prev.append(previous)
             data_act.append(labels)
             if r == 0:
                 actions = labels
@@ -113,8 +119,11 @@ def train_dagger(
                 ep_len[:] = 0
                 dones = np.ones(env.num_envs, dtype=bool)
             stack = push_frames(stack, obs, dones, frame_stack)
+            previous = np.where(dones, -1, here)
             collected += env.num_envs
         x = np.concatenate(data_obs)
+        if frame_stack > 1:
+            x = LinkedFrames(x, np.concatenate(data_prev), frame_stack)
         y = np.concatenate(data_act)
         loss, accuracy = _fit(policy, optimizer, x, y, epochs, batch_size, rng)
         line = f"round {r + 1}/{rounds}: {len(y)} labels, loss {loss:.3f}, accuracy {accuracy:.3f}"
@@ -150,7 +159,7 @@ def train_dagger(
     return model, record
 
 
-def _fit(policy, optimizer, x: np.ndarray, y: np.ndarray, epochs: int, batch_size: int,
+def _fit(policy, optimizer, x: Union[np.ndarray, LinkedFrames], y: np.ndarray, epochs: int, batch_size: int,
          rng: np.random.Generator) -> tuple[float, float]:
     policy.set_training_mode(True)
     device = policy.device
