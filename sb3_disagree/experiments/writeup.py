@@ -127,7 +127,7 @@ def _body(experiment: Experiment, grid, summaries: list, figure_link: str, note:
             f"{seeds_text}; {experiment.steps:,} env steps per run; {platform.machine()}, "
             f"{os.cpu_count()} cores, {how}{'; ' + note if note else ''}. ACER: "
             f"{yaml.safe_dump(acer, default_flow_style=True, width=200).strip()}. {continued}\n\n"
-            f"![{name}]({figure_link})\n\n{table_markdown(experiment, summaries)}\n\n"
+            f"![{Path(figure_link).stem}]({figure_link})\n\n{table_markdown(experiment, summaries)}\n\n"
             "Solid lines: training success (the last 50 episodes over all envs, priors included where they were "
             "followed), mean over seeds with a 95% t-interval (none with fewer than 3 seeds); dashed: the new policy "
             f"alone (no priors, sampled actions, {alone_every}){greedy_curve}. Table: steps to 50%/90% and success at "
