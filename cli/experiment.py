@@ -103,13 +103,12 @@ def report(
     ``--seeds`` compares cells on the seeds they share where some have more finished than others."""
     with clean_errors():
         from sb3_disagree.experiments.spec import load_experiment
-        from sb3_disagree.experiments.writeup import write_report
+        from sb3_disagree.experiments.writeup import report_files, write_report
 
         experiment, only, chosen = load_experiment(name), _seeds(seeds), _cells(cells)
         experiment.restrict(seeds=only, cells=chosen)
         root = _root(experiment.name, out)
         console.print(write_report(experiment, root, figure, note, section, only, chosen, title))
-        title = title or experiment.name
-        markdown = "report.md" if title == experiment.name else f"{title}.md"
-        console.print(f"wrote {root / markdown} and {root / (title + '.png')}"
-                      + (f"; the section {title} of {section}" if section else ""))
+        markdown, png = report_files(root, experiment, title)
+        console.print(f"wrote {markdown} and {png}"
+                      + (f"; the section {title or experiment.name} of {section}" if section else ""))

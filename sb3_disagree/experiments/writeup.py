@@ -37,6 +37,12 @@ def write_section(page: Path, name: str, title: str, body: str) -> None:
     page.write_text(text)
 
 
+def report_files(root: Path, experiment: Experiment, name: Optional[str] = None) -> tuple[Path, Path]:
+    """The markdown and the figure that the report of this name (default: the experiment's own) writes in ``root``."""
+    name = name or experiment.name
+    return root / ("report.md" if name == experiment.name else f"{name}.md"), root / f"{name}.png"
+
+
 def write_report(experiment: Experiment, root: Path, figure: Optional[Path] = None, note: str = "",
                  section: Optional[Path] = None, seeds: Optional[list[int]] = None,
                  cells: Optional[list[str]] = None, name: Optional[str] = None) -> str:
@@ -63,13 +69,12 @@ def write_report(experiment: Experiment, root: Path, figure: Optional[Path] = No
         raise FileNotFoundError(f"no finished runs of {experiment.name} in {root}; run: dopt experiment run "
                                 f"{experiment.name} --out {root}")
     write_training_curves(root, grid, {(s.cell, seed): c for s in summaries for seed, c in zip(s.seeds, s.seed_curves)})
-    png = root / f"{name}.png"
+    markdown, png = report_files(root, experiment, name)
     plot(experiment, grid, summaries, png, root)
     if figure is not None:
         figure.parent.mkdir(parents=True, exist_ok=True)
         figure.write_bytes(png.read_bytes())
     command = _command(experiment, root, figure, section, seeds, cells, name, summaries)
-    markdown = root / ("report.md" if name == experiment.name else f"{name}.md")
     markdown.write_text(f"# {name}\n\n" + _body(experiment, grid, summaries, png.name, note, command) + "\n")
     if section is None:
         return markdown.read_text()
