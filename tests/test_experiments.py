@@ -334,6 +334,43 @@ def test_shipped_experiments_load():
         assert load_experiment(name).runs()
 
 
+def test_a_cells_mode_picks_acers_defaults_and_the_grid_and_cell_go_on_top(tmp_path):
+    from sb3_disagree.run import ACER_KWARGS, RunConfig
+
+    spec = {"name": "modes", "goal": "bathtub", "priors": ["shower", "toilet"], "steps": 320, "seeds": [0],
+            "budgets": [320], "acer": {"ent_coef": 0.02},
+            "cells": {"kick": {"mode": "kickstart"}, "kick-01": {"mode": "kickstart", "acer": {"reward_scale": 0.1}},
+                      "options": {"mode": "disagreement"}, "default": {}}}
+    path = tmp_path / "modes.yaml"
+    path.write_text(yaml.safe_dump(spec))
+    acer = {r.cell: r.config.acer_kwargs for r in load_experiment(path).runs()}
+    assert acer["kick"]["reward_scale"] == 1.0 and acer["default"]["reward_scale"] == 1.0  # as dopt train's
+    assert acer["kick-01"]["reward_scale"] == 0.1 and acer["options"]["reward_scale"] == 0.1
+    assert all(a["ent_coef"] == 0.02 and a["n_steps"] == ACER_KWARGS["n_steps"] for a in acer.values())
+    assert acer["default"] == RunConfig(goal="bathtub", acer_kwargs={"ent_coef": 0.02}).acer_kwargs
+
+
+def test_shipped_grids_still_make_their_committed_runs():
+    """Every committed run's settings are what its grid makes today (a changed default is pinned in the grids
+    whose results used the old one), so that rerunning a grid reproduces its table."""
+    from dataclasses import asdict
+    from pathlib import Path
+
+    results = Path(__file__).resolve().parents[1] / "benchmarks" / "results" / "experiments"
+    compared = 0
+    for path in sorted(SHIPPED.glob("*.yaml")):
+        experiment = load_experiment(path)
+        for run in experiment.runs():
+            saved_path = results / experiment.name / run.cell / f"seed-{run.config.seed}" / "result.json"
+            if not saved_path.exists() or experiment.continues:  # a continuation keeps its run's saved settings
+                continue
+            saved, now = json.loads(saved_path.read_text())["config"], asdict(run.config)
+            assert saved["acer_kwargs"] == now["acer_kwargs"], (experiment.name, run.cell)
+            assert saved["mode"] == now["mode"] and saved.get("frame_stack", 1) == now["frame_stack"]
+            compared += 1
+    assert compared > 200
+
+
 def test_the_policy_alone_table_reads_greedy_and_sampled_at_each_evaluation():
     from sb3_disagree.experiments.report import alone_markdown
 

@@ -39,7 +39,7 @@ from typing import Any, Optional
 import yaml
 
 from sb3_disagree.files import safe_name
-from sb3_disagree.run import ACER_KWARGS, RunConfig
+from sb3_disagree.run import RunConfig, acer_defaults
 
 # Experiments shipped with the repository; a path to any YAML file works too.
 SHIPPED = Path(__file__).resolve().parents[1] / "data" / "experiments"
@@ -191,8 +191,11 @@ class Experiment:
                 if same_as is not None and (not isinstance(same_as, str) or same_as.count("/") != 1):
                     raise ValueError(f"experiment {self.name!r}, cell {cell!r}: same_as must read OTHER/CELL, "
                                      f"got {same_as!r}")
-                acer = {**ACER_KWARGS, **self.acer, **overrides.pop("acer", {})}
+                cell_acer = overrides.pop("acer", {})
                 fields = {**self.run, **overrides}
+                # The cell's mode picks ACER's defaults, as dopt train's does; the grid's and the cell's go on top.
+                mode = fields.get("mode", RunConfig.__dataclass_fields__["mode"].default)
+                acer = {**acer_defaults(mode if isinstance(mode, str) else ""), **self.acer, **cell_acer}
                 unknown = set(fields) - set(RunConfig.__dataclass_fields__)
                 if unknown:
                     raise ValueError(f"experiment {self.name!r}, cell {cell!r}: unknown run fields {sorted(unknown)}")

@@ -19,6 +19,16 @@ PPO_KWARGS: dict[str, Any] = dict(n_steps=128, n_epochs=4, batch_size=256, learn
 # new policy alone fell back to ~0 success; at 0.1 it trains stably (docs/history.md, "Choosing ACER's scale").
 ACER_KWARGS: dict[str, Any] = dict(n_steps=20, buffer_size=50_000, replay_start=2_000, replay_ratio=4, ent_coef=0.01,
                                    learning_rate=7e-4, reward_scale=0.1)
+# Where the new policy acts alone from the first step (kickstarting), rewards at full scale: the entropy bonus is
+# then ten times weaker against them and the policy sharpens, so that its argmax (SB3's evaluate_policy) reaches the
+# goal far more often (docs/results.md, kickstart-rs1); disagreement options keep 0.1, whose priors' branch opens
+# where the new policy is unsure.
+MODE_ACER_KWARGS: dict[str, dict[str, Any]] = {"kickstart": dict(reward_scale=1.0)}
+
+
+def acer_defaults(mode: str) -> dict[str, Any]:
+    """ACER's settings for a mode when a run names none: ``ACER_KWARGS`` with the mode's own on top."""
+    return {**ACER_KWARGS, **MODE_ACER_KWARGS.get(mode, {})}
 
 
 @dataclass
@@ -44,7 +54,8 @@ class RunConfig:
     :param n_envs: Parallel envs
     :param embedding: Word vectors file; None for the default
     :param zoo: Zoo folder; None for the shipped one
-    :param acer_kwargs: ACER's hyperparameters
+    :param acer_kwargs: ACER's hyperparameters, on top of the mode's defaults (``acer_defaults(mode)``); the
+        saved config holds them all
     :param env_kwargs: The environment's keyword arguments besides the goal
     :param eval_every: Evaluate the new policy alone (no priors, sampled actions) every this many env
         steps, logged as ``eval/success_rate`` and kept in ``evaluations.npz``; 0 never
@@ -82,7 +93,7 @@ class RunConfig:
     n_envs: int = 4
     embedding: Optional[str] = None
     zoo: Optional[str] = None
-    acer_kwargs: dict[str, Any] = field(default_factory=lambda: dict(ACER_KWARGS))
+    acer_kwargs: dict[str, Any] = field(default_factory=dict)
     env_kwargs: dict[str, Any] = field(default_factory=dict)
     eval_every: int = 0
     eval_episodes: int = 20
@@ -95,6 +106,10 @@ class RunConfig:
     record_trajectories: bool = False
     greedy_phase: int = 0
     greedy_epsilon: float = 0.2
+
+    def __post_init__(self) -> None:
+        if isinstance(self.acer_kwargs, dict) and isinstance(self.mode, str):  # anything else: validate() says so
+            self.acer_kwargs = {**acer_defaults(self.mode), **self.acer_kwargs}
 
     @classmethod
     def of_saved(cls, saved: dict[str, Any]) -> "RunConfig":
