@@ -39,8 +39,8 @@ class RunConfig:
     :param goal: The new goal word
     :param env_id: Gymnasium id of the environment
     :param mode: "kickstart" (the default: the new policy acts alone, distilled toward the priors' mixture on every
-        state with a weight annealed to zero, ``KICKSTART`` unless ``acer_kwargs`` say otherwise; of the modes
-        measured, the one whose saved policy works best on its own, docs/results.md), "disagreement" (the
+        state with a weight annealed to zero, ``KICKSTART`` unless ``acer_kwargs`` say otherwise, rewards at full
+        scale; of the modes measured, the one whose saved policy works best on its own, docs/results.md), "disagreement" (the
         paper's disagreement options), "room-sensor", "scratch", "finetune" (ACER from the most similar prior's
         weights, no behaviour), "jsrl"
         (Jump-Start RL: the priors guide each episode's first steps, fewer as the new policy succeeds) or
