@@ -350,6 +350,19 @@ def test_a_cells_mode_picks_acers_defaults_and_the_grid_and_cell_go_on_top(tmp_p
     assert acer["default"] == RunConfig(goal="bathtub", acer_kwargs={"ent_coef": 0.02}).acer_kwargs
 
 
+def test_the_reports_acer_line_names_what_cells_share_and_what_each_sets_itself():
+    from types import SimpleNamespace
+
+    from sb3_disagree.experiments.writeup import acer_text
+
+    def cell(name, **acer):
+        return SimpleNamespace(cell=name, records=[{"config": {"acer_kwargs": {"n_steps": 20, **acer}}}])
+
+    assert acer_text([cell("a", reward_scale=0.1), cell("b", reward_scale=0.1)]) == "{n_steps: 20, reward_scale: 0.1}"
+    text = acer_text([cell("a", reward_scale=0.1), cell("b", reward_scale=1.0, distill_coef=1.0)])
+    assert text == "{n_steps: 20}; the cells' own: a {reward_scale: 0.1}; b {distill_coef: 1.0, reward_scale: 1.0}"
+
+
 def test_shipped_grids_still_make_their_committed_runs():
     """Every committed run's settings are what its grid makes today (a changed default is pinned in the grids
     whose results used the old one), so that rerunning a grid reproduces its table."""

@@ -97,9 +97,22 @@ def _command(experiment: Experiment, root: Path, figure: Optional[Path], section
             f"`{report}`")
 
 
+def acer_text(summaries: list) -> str:
+    """ACER's settings every cell shares, then each cell's own where they differ (a cell may set its own)."""
+
+    def flow(settings: dict) -> str:
+        return yaml.safe_dump(settings, default_flow_style=True, width=200).strip()
+
+    per_cell = {c.cell: c.records[0]["config"]["acer_kwargs"] for c in summaries}
+    first = next(iter(per_cell.values()))
+    shared = {k: v for k, v in first.items() if all(k in a and a[k] == v for a in per_cell.values())}
+    own = [f"{cell} {flow({k: v for k, v in a.items() if k not in shared})}" for cell, a in per_cell.items()
+           if set(a) - set(shared)]
+    return flow(shared) + (f"; the cells' own: {'; '.join(own)}" if own else "")
+
+
 def _body(experiment: Experiment, grid, summaries: list, figure_link: str, note: str, command: str) -> str:
     name = experiment.name
-    acer = summaries[0].records[0]["config"]["acer_kwargs"]
     continued = ""
     if experiment.continues:
         begun = sorted({r.get("from_steps", 0) for c in summaries for r in c.records})
@@ -130,8 +143,7 @@ def _body(experiment: Experiment, grid, summaries: list, figure_link: str, note:
                 "update and one in each of its two threads while the replay updates overlap the rollouts)")
     body = (f"Commands: {command} (grid: `sb3_disagree/data/experiments/{name}.yaml`). "
             f"{seeds_text}; {experiment.steps:,} env steps per run; {platform.machine()}, "
-            f"{os.cpu_count()} cores, {how}{'; ' + note if note else ''}. ACER: "
-            f"{yaml.safe_dump(acer, default_flow_style=True, width=200).strip()}. {continued}\n\n"
+            f"{os.cpu_count()} cores, {how}{'; ' + note if note else ''}. ACER: {acer_text(summaries)}. {continued}\n\n"
             f"![{Path(figure_link).stem}]({figure_link})\n\n{table_markdown(experiment, summaries)}\n\n"
             "Solid lines: training success (the last 50 episodes over all envs, priors included where they were "
             "followed), mean over seeds with a 95% t-interval (none with fewer than 3 seeds); dashed: the new policy "
