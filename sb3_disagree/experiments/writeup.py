@@ -98,17 +98,22 @@ def _command(experiment: Experiment, root: Path, figure: Optional[Path], section
 
 
 def acer_text(summaries: list) -> str:
-    """ACER's settings every cell shares, then each cell's own where they differ (a cell may set its own)."""
+    """ACER's settings as most cells have them, then each cell's own where it differs (a cell may set its own)."""
+    from collections import Counter
 
     def flow(settings: dict) -> str:
         return yaml.safe_dump(settings, default_flow_style=True, width=200).strip()
 
     per_cell = {c.cell: c.records[0]["config"]["acer_kwargs"] for c in summaries}
-    first = next(iter(per_cell.values()))
-    shared = {k: v for k, v in first.items() if all(k in a and a[k] == v for a in per_cell.values())}
-    own = [f"{cell} {flow({k: v for k, v in a.items() if k not in shared})}" for cell, a in per_cell.items()
-           if set(a) - set(shared)]
-    return flow(shared) + (f"; the cells' own: {'; '.join(own)}" if own else "")
+    common = {}
+    for key in dict.fromkeys(k for a in per_cell.values() for k in a):
+        (value, _), = Counter(repr(a.get(key, "<unset>")) for a in per_cell.values()).most_common(1)
+        holder = next(a for a in per_cell.values() if repr(a.get(key, "<unset>")) == value)
+        if key in holder:
+            common[key] = holder[key]
+    own = [f"{cell} {flow({k: v for k, v in a.items() if k not in common or common[k] != v})}"
+           for cell, a in per_cell.items() if any(k not in common or common[k] != v for k, v in a.items())]
+    return flow(common) + (f"; the cells' own: {'; '.join(own)}" if own else "")
 
 
 def _body(experiment: Experiment, grid, summaries: list, figure_link: str, note: str, command: str) -> str:
