@@ -19,11 +19,10 @@ PPO_KWARGS: dict[str, Any] = dict(n_steps=128, n_epochs=4, batch_size=256, learn
 # new policy alone fell back to ~0 success; at 0.1 it trains stably (docs/history.md, "Choosing ACER's scale").
 ACER_KWARGS: dict[str, Any] = dict(n_steps=20, buffer_size=50_000, replay_start=2_000, replay_ratio=4, ent_coef=0.01,
                                    learning_rate=7e-4, reward_scale=0.1)
-# Where the new policy acts alone from the first step (kickstarting), rewards at full scale: the entropy bonus is
-# then ten times weaker against them and the policy sharpens, so that its argmax (SB3's evaluate_policy) reaches the
-# goal far more often (docs/results.md, kickstart-rs1); disagreement options keep 0.1, whose priors' branch opens
-# where the new policy is unsure.
-MODE_ACER_KWARGS: dict[str, dict[str, Any]] = {"kickstart": dict(reward_scale=1.0)}
+# A mode's own ACER settings on top of ACER_KWARGS; none at present. Rewards at full scale for kickstarting
+# (`reward_scale` 1) made its argmax far more reliable on bathtub (greedy 0.22 -> 0.56, five seeds) but not on
+# nightstand (0.30 greedy and 0.91 sampled over three seeds, against 0.39 and 1.00): docs/results.md.
+MODE_ACER_KWARGS: dict[str, dict[str, Any]] = {}
 
 
 def acer_defaults(mode: str) -> dict[str, Any]:
@@ -39,8 +38,8 @@ class RunConfig:
     :param goal: The new goal word
     :param env_id: Gymnasium id of the environment
     :param mode: "kickstart" (the default: the new policy acts alone, distilled toward the priors' mixture on every
-        state with a weight annealed to zero, ``KICKSTART`` unless ``acer_kwargs`` say otherwise, rewards at full
-        scale; of the modes measured, the one whose saved policy works best on its own, docs/results.md), "disagreement" (the
+        state with a weight annealed to zero, ``KICKSTART`` unless ``acer_kwargs`` say otherwise; of the modes
+        measured, the one whose saved policy works best on its own, docs/results.md), "disagreement" (the
         paper's disagreement options), "room-sensor", "scratch", "finetune" (ACER from the most similar prior's
         weights, no behaviour), "jsrl"
         (Jump-Start RL: the priors guide each episode's first steps, fewer as the new policy succeeds) or
