@@ -111,8 +111,8 @@ def acer_text(summaries: list) -> str:
         holder = next(a for a in per_cell.values() if repr(a.get(key, "<unset>")) == value)
         if key in holder:
             common[key] = holder[key]
-    own = [f"{cell} {flow({k: v for k, v in a.items() if k not in common or common[k] != v})}"
-           for cell, a in per_cell.items() if any(k not in common or common[k] != v for k, v in a.items())]
+    differs = {cell: {k: v for k, v in a.items() if k not in common or common[k] != v} for cell, a in per_cell.items()}
+    own = [f"{cell} {flow(d)}" for cell, d in differs.items() if d]
     return flow(common) + (f"; the cells' own: {'; '.join(own)}" if own else "")
 
 
