@@ -148,6 +148,9 @@ class RunConfig:
                              f"{self.greedy_phase} and {self.greedy_epsilon}")
         if self.greedy_phase and self.mode == "ppo":
             raise ValueError("--greedy-phase is a behaviour of ACER; --mode ppo trains SB3's PPO without one")
+        reward_scale = self.acer_kwargs.get("reward_scale", 1.0)
+        if isinstance(reward_scale, bool) or not isinstance(reward_scale, (int, float)) or not reward_scale > 0:
+            raise ValueError(f"--reward-scale must be a number > 0, got {reward_scale!r}")
         if self.eval_every < 0 or self.eval_episodes < 1:
             raise ValueError("--eval-every must be >= 0 and --eval-episodes positive")
 
