@@ -80,8 +80,6 @@ def train(**options) -> None:
         out, resume, force, card_episodes, every, reward_scale = (
             options.pop(k) for k in ("out", "resume", "force", "card_episodes", "progress_every", "reward_scale"))
         if reward_scale is not None:
-            if resume is not None:
-                raise ValueError(f"--resume continues {resume} with its saved settings; drop --reward-scale")
             if options["mode"] == "ppo":
                 raise ValueError("--reward-scale scales ACER's rewards; --mode ppo trains SB3's PPO without it")
             options["acer_kwargs"] = {"reward_scale": reward_scale}

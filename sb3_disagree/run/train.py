@@ -26,7 +26,7 @@ from sb3_disagree.checkpoints import Checkpoint, latest_checkpoint, save_checkpo
 from sb3_disagree.files import write_atomic
 from sb3_disagree.options import PriorSet, make_options
 from sb3_disagree.priors.select import choose_priors, guide_horizon
-from sb3_disagree.run.config import RunConfig
+from sb3_disagree.run.config import RunConfig, acer_defaults
 from sb3_disagree.run.envs import build_env
 from sb3_disagree.run.evaluation import EvaluateAlone
 from sb3_disagree.run.logs import run_logger
@@ -138,7 +138,7 @@ def train(config: RunConfig, out: Path = Path("runs"), resume: Optional[Path] = 
 def check_resume(config: RunConfig, resume: Path, force: bool = False) -> None:
     """
     A resumed run keeps its saved settings: a ValueError if ``config`` changes one of them (any field not at its
-    default besides the goal, the budget and the loop), rather than dropping it silently.
+    default besides the goal, the budget and the loop, or an ACER setting not at its mode's), rather than dropping it silently.
 
     :param config: The settings asked for
     :param resume: The run folder to continue
@@ -156,6 +156,8 @@ def check_resume(config: RunConfig, resume: Path, force: bool = False) -> None:
     # The loop (overlap) is the saved one whatever is asked; steps is the new budget.
     given = [f.name for f in fields(RunConfig) if f.name not in ("goal", "steps", "overlap", "acer_kwargs")
              and getattr(config, f.name) != getattr(defaults, f.name)]
+    # ACER's settings beyond the mode's defaults (on the command line, --reward-scale)
+    given += [key for key, value in config.acer_kwargs.items() if acer_defaults(config.mode).get(key) != value]
     if given:
         flags = ", ".join({"env_id": "--env"}.get(name, "--" + name.replace("_", "-")) for name in given)
         raise ValueError(f"--resume continues {resume} with its saved settings; drop {flags}")
