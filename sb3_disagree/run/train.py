@@ -138,7 +138,8 @@ def train(config: RunConfig, out: Path = Path("runs"), resume: Optional[Path] = 
 def check_resume(config: RunConfig, resume: Path, force: bool = False) -> None:
     """
     A resumed run keeps its saved settings: a ValueError if ``config`` changes one of them (any field not at its
-    default besides the goal, the budget and the loop, or an ACER setting not at its mode's), rather than dropping it silently.
+    default besides the goal, the budget and the loop, or an ACER setting not at its
+    mode's), rather than dropping it silently.
 
     :param config: The settings asked for
     :param resume: The run folder to continue
