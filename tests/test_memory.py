@@ -101,9 +101,9 @@ def test_distillation_pulls_the_policy_to_the_teacher_and_fades_on_schedule():
         prob_of_2[coef] = model.policy.action_probs(obs)[:, 2].mean().item()
     assert prob_of_2[1.0] > 0.8 and prob_of_2[0.0] < 0.6, prob_of_2
     model.distill_steps = 400
-    assert model._distill_coef() == 0.0  # annealed linearly to zero at distill_steps
+    assert model.distill_weight() == 0.0  # annealed linearly to zero at distill_steps
     model.num_timesteps = 100
-    assert model._distill_coef() == pytest.approx(0.75)
+    assert model.distill_weight() == pytest.approx(0.75)
 
 
 def test_entropy_weight_schedules():

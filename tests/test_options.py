@@ -252,6 +252,23 @@ def test_prior_teacher_acts_with_the_policy_and_offers_the_priors_mixture():
     assert th.allclose(step.teacher, prior_probs.mean(0)) and not step.followed.any()
 
 
+def test_prior_teacher_stops_asking_the_priors_once_distillation_has_annealed_to_zero():
+    from sb3_disagree.options import PriorTeacher
+
+    n = 4
+    priors = FakePriors(_priors(AGREE, n))
+    pi = th.tensor([[0.2, 0.5, 0.3]]).expand(n, A)
+    model = SimpleNamespace(n_envs=n, device=th.device("cpu"), weight=0.5)
+    model.distill_weight = lambda: model.weight
+    b = PriorTeacher(priors)
+    b.setup(model)
+    assert b(None, pi, [{}] * n, np.ones(n, dtype=bool)).teacher is not None and priors.step == 1
+    model.weight = 0.0
+    step = b(None, pi, [{}] * n, np.zeros(n, dtype=bool))
+    assert step.teacher is None and priors.step == 1  # the priors were not run
+    assert th.allclose(step.mu, pi)
+
+
 def test_greedy_phase_acts_by_the_argmax_with_an_exact_mu_after_its_start():
     from sb3_disagree.behaviour import GreedyPhase
     from sb3_disagree.options import PriorTeacher

@@ -382,7 +382,7 @@ class ACER(BaseAlgorithm):
             k = -average_probs / (f.detach() + EPS)
             g, tr_scale = trust_region_project(g, k, self.delta)
         loss = -(probs * g.detach()).sum() / n + self.q_coef * q_loss
-        distill_coef, distill = self._distill_coef(), th.zeros(())
+        distill_coef, distill = self.distill_weight(), th.zeros(())
         if distill_coef > 0 and segment.teacher is not None:
             teacher = th.as_tensor(segment.teacher, device=self.device).reshape(n, -1)
             has_teacher = (teacher.sum(-1) > 0).float()
@@ -411,7 +411,7 @@ class ACER(BaseAlgorithm):
             **({"distill_loss": distill.item(), "distill_coef": distill_coef} if self.distill_coef > 0 else {}),
         }
 
-    def _distill_coef(self) -> float:
+    def distill_weight(self) -> float:
         """The distillation weight now: ``distill_coef * max(0, 1 - num_timesteps / distill_steps)``."""
         if self.distill_steps <= 0:
             return self.distill_coef
