@@ -3,10 +3,13 @@ End-to-end training throughput on the apartment RGB: `dopt train` with disagreem
 scratch), each with ``--overlap`` (the default) and with the sequential loop of ``--no-overlap``, against
 SB3's PPO CnnPolicy on the same env, one after another in the same process, each for the same number
 of env steps after its own warm-up; with ``--repeats N`` the rows are measured N times, interleaved, and
-the table gives the median and range.
+the table gives the median and range. ``--set kickstart`` measures `dopt train`'s default mode instead:
+kickstarting while its distillation is weighted (the priors run every step) and after the weight has reached 0
+(they no longer run; the first 50k steps of a run against the rest), with both loops.
 Written into docs/benchmarks.md.
 
     python benchmarks/train_speed.py --steps 6000 [--threads 2] [--vec-env dummy subproc] [--repeats 3] [--write]
+    python benchmarks/train_speed.py --set kickstart --vec-env dummy --threads 2 --repeats 3 [--write]
 """
 
 import argparse
@@ -15,6 +18,7 @@ import platform
 import time
 from pathlib import Path
 from tempfile import TemporaryDirectory
+from typing import Optional
 
 import numpy as np
 import torch as th
@@ -37,13 +41,14 @@ class Rate(BaseCallback):
         return (self.num_timesteps - self.n0) / (time.perf_counter() - self.t0)
 
 
-def acer_rate(mode: str, steps: int, warm: int, vec_env: str, overlap: bool = False) -> float:
+def acer_rate(mode: str, steps: int, warm: int, vec_env: str, overlap: bool = False,
+              acer_kwargs: Optional[dict] = None) -> float:
     from sb3_disagree.run import RunConfig, train
 
     with TemporaryDirectory() as tmp:
         rate = Rate(warm)
         config = RunConfig(goal="bathtub", mode=mode, priors=["shower", "toilet"], steps=warm + steps, vec_env=vec_env,
-                           overlap=overlap)
+                           overlap=overlap, acer_kwargs=acer_kwargs or {})
         train(config, Path(tmp), callbacks=[rate])
         return rate.rate()
 
@@ -70,16 +75,29 @@ def main() -> None:
     parser.add_argument("--threads", type=int, default=os.cpu_count())
     parser.add_argument("--vec-env", nargs="+", default=["dummy", "subproc"])
     parser.add_argument("--repeats", type=int, default=1)
+    parser.add_argument("--set", choices=["paper", "kickstart"], default="paper",
+                        help="paper: disagreement options and scratch against PPO; kickstart: dopt train's default mode")
     parser.add_argument("--write", action="store_true")
     args = parser.parse_args()
     th.set_num_threads(args.threads)
-    columns = {
+    # The distillation weight is 0 from the start with distill_steps 1: the steps after a run's first 50k.
+    after = dict(distill_steps=1)
+    kickstart = {
+        "kickstart (--overlap), distilling": lambda v: acer_rate("kickstart", args.steps, args.warm, v, True),
+        "kickstart (--overlap), after distillation": lambda v: acer_rate("kickstart", args.steps, args.warm, v, True,
+                                                                         after),
+        "kickstart --no-overlap, distilling": lambda v: acer_rate("kickstart", args.steps, args.warm, v),
+        "kickstart --no-overlap, after distillation": lambda v: acer_rate("kickstart", args.steps, args.warm, v,
+                                                                          False, after),
+    }
+    paper = {
         "dopt train --no-overlap, disagreement": lambda v: acer_rate("disagreement", args.steps, args.warm, v),
         "dopt train (--overlap), disagreement": lambda v: acer_rate("disagreement", args.steps, args.warm, v, True),
         "dopt train --no-overlap, scratch": lambda v: acer_rate("scratch", args.steps, args.warm, v),
         "dopt train (--overlap), scratch": lambda v: acer_rate("scratch", args.steps, args.warm, v, True),
         "SB3 PPO CnnPolicy": lambda v: ppo_rate(args.steps, args.warm, v),
     }
+    columns = kickstart if args.set == "kickstart" else paper
     rates: dict[tuple[str, str], list[float]] = {}
     for _ in range(args.repeats):  # interleaved, so that a slow minute of the machine hits every column
         for vec_env in args.vec_env:
@@ -94,17 +112,23 @@ def main() -> None:
 
     rows = [f"| {v} | " + " | ".join(cell(rates[v, name]) for name in columns) + " |" for v in args.vec_env]
     how = "one value per cell" if args.repeats == 1 else f"median (min-max) of {args.repeats} interleaved runs per cell"
-    body = (f"Command: `python benchmarks/train_speed.py --steps {args.steps} --threads {args.threads} --vec-env "
+    body = (f"Command: `python benchmarks/train_speed.py --set {args.set} --steps {args.steps} --threads {args.threads} --vec-env "
             f"{' '.join(args.vec_env)} --repeats {args.repeats}`; {platform.machine()}, {os.cpu_count()} cores, "
             f"{args.threads} torch threads, one run at a time on a quiet machine; {how}. Env steps/s over {args.steps} "
             f"steps after a {args.warm}-step warm-up (ACER's replay updates have started), apartment RGB 60x80, 4 envs; "
-            "ACER with the defaults of `dopt train`, PPO CnnPolicy with rl-zoo3's Atari settings (n_steps 128, "
-            "4 epochs, batch 256).\n\n"
-            "| envs | " + " | ".join(columns) + " |\n|---|" + "---|" * len(columns) + "\n" + "\n".join(rows) + "\n")
+            + ("ACER with the defaults of `dopt train`, PPO CnnPolicy with rl-zoo3's Atari settings (n_steps 128, "
+               "4 epochs, batch 256).\n\n" if args.set == "paper" else
+               "kickstarting with the defaults of `dopt train` (priors shower and toilet); 'after distillation': "
+               "distillation weight 0 from the start, so the priors are not run (a run's steps after 50k).\n\n")
+            + "| envs | " + " | ".join(columns) + " |\n|---|" + "---|" * len(columns) + "\n" + "\n".join(rows) + "\n")
     if args.write:
         from docs_section import write_section
 
-        write_section("train-speed", "Training throughput: dopt train against PPO", body)
+        if args.set == "paper":
+            write_section("train-speed", "Training throughput: dopt train against PPO", body)
+        else:
+            write_section("train-speed-kickstart", "Training throughput: kickstarting, during and after distillation",
+                          body)
     print(body)
 
 
