@@ -37,6 +37,35 @@ def test_save_load_gives_same_actions_and_hyperparameters(tmp_path):
     assert any(k.startswith("average_net.") for k in params["policy"])
 
 
+def test_ema_is_the_policy_predict_acts_with_and_round_trips(tmp_path):
+    env = make_vec_env(ChainEnv, n_envs=2, seed=0)
+    model = ACER("MlpPolicy", env, seed=0, policy_kwargs=dict(net_arch=[16]), ema_decay=0.9,
+                 **{**HYPER, "replay_start": 10_000})
+    policy = model.policy
+    before = [p.clone() for p in policy.ema_net.parameters()]
+    model.learn(14)  # one segment of 7 steps in 2 envs, no replay yet: a single on-policy update
+    net, ema = list(policy.net.parameters()), list(policy.ema_net.parameters())
+    assert model._n_updates == 1
+    for b, n, e in zip(before, net, ema):  # theta_ema = 0.9 * theta_ema + 0.1 * theta after the one update
+        assert th.allclose(e, 0.9 * b + 0.1 * n.detach(), atol=1e-6)
+    model.learn(300, reset_num_timesteps=False)
+    obs = th.eye(5)
+    with th.no_grad():
+        ema_probs = th.softmax(policy.ema_net.logits(obs), -1)
+        assert th.allclose(policy.get_distribution(obs).distribution.probs, ema_probs)
+        assert not th.allclose(policy.action_probs(obs), ema_probs)  # the rollouts act with the current weights
+    greedy = model.predict(obs.numpy(), deterministic=True)[0]
+    assert np.array_equal(greedy, ema_probs.argmax(-1).numpy())
+    model.save(tmp_path / "model.zip")
+    loaded = ACER.load(tmp_path / "model.zip")
+    assert loaded.ema_decay == 0.9 and loaded.policy.ema
+    with th.no_grad():
+        assert th.allclose(loaded.policy.get_distribution(obs).distribution.probs, ema_probs)
+    assert ACER("MlpPolicy", env, **HYPER).policy.ema_net is None  # none kept by default
+    with pytest.raises(ValueError, match="ema_decay"):
+        ACER("MlpPolicy", env, ema_decay=1.0)
+
+
 def test_replay_buffer_round_trip_and_continued_learning(tmp_path):
     env = make_vec_env(ChainEnv, n_envs=2, seed=0)
     model = ACER("MlpPolicy", env, n_steps=5, seed=0)

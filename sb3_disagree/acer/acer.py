@@ -75,6 +75,9 @@ class ACER(BaseAlgorithm):
     :param c: Truncation of the importance weights in the policy gradient (bias correction beyond it)
     :param trust_region: Whether to use the efficient trust region against the average policy network
     :param alpha: Decay of the average policy network, updated after every optimizer step
+    :param ema_decay: Decay of a slow moving average of the policy's weights, updated after every optimizer step
+        and acted with by ``predict`` (what ``evaluate_policy`` and a user of the saved model see); rollouts and
+        updates use the current weights. 0 (the default) keeps none: ``predict`` uses the current weights
     :param delta: Bound of the trust region
     :param distill_coef: Weight of the distillation term toward the behaviour's teacher (the priors' mixture;
         kickstarting), 0 for none
@@ -124,6 +127,7 @@ class ACER(BaseAlgorithm):
         c: float = 10.0,
         trust_region: bool = True,
         alpha: float = 0.99,
+        ema_decay: float = 0.0,
         delta: float = 1.0,
         distill_coef: float = 0.0,
         distill_steps: int = 0,
@@ -166,6 +170,9 @@ class ACER(BaseAlgorithm):
         self.c = c
         self.trust_region = trust_region
         self.alpha = alpha
+        if not 0 <= ema_decay < 1:
+            raise ValueError(f"ema_decay must be in [0, 1), got {ema_decay}")
+        self.ema_decay = ema_decay
         self.delta = delta
         if distill_states not in ("followed", "all"):
             raise ValueError(f"distill_states must be 'followed' or 'all', got {distill_states!r}")
@@ -185,8 +192,9 @@ class ACER(BaseAlgorithm):
             raise ValueError("ACER does not support Dict observation spaces")
         self._setup_lr_schedule()
         self.set_random_seed(self.seed)
+        policy_kwargs = {**self.policy_kwargs, **({"ema": True} if self.ema_decay > 0 else {})}
         self.policy = self.policy_class(  # type: ignore[assignment]
-            self.observation_space, self.action_space, self.lr_schedule, **self.policy_kwargs
+            self.observation_space, self.action_space, self.lr_schedule, **policy_kwargs
         )
         self.policy = self.policy.to(self.device)
         self.replay_buffer = SegmentReplayBuffer(
@@ -397,6 +405,7 @@ class ACER(BaseAlgorithm):
         grad_norm = th.nn.utils.clip_grad_norm_(policy.net.parameters(), self.max_grad_norm)
         policy.optimizer.step()
         policy.update_average(self.alpha)
+        policy.update_ema(self.ema_decay)
         self._n_updates += 1
         return {
             "policy_loss": -terms.truncated_is.mean().item(),

@@ -73,7 +73,10 @@ class ACERPolicy(BasePolicy):
 
     The average policy network (``average_net``) lives inside the policy, so that ``save``/``load``
     and ``get_parameters`` carry it; it is excluded from the optimizer and moves only by
-    :meth:`update_average`.
+    :meth:`update_average`. With ``ema=True`` the policy also keeps a slow exponential moving average of its
+    weights (``ema_net``, moved by :meth:`update_ema`), and what the policy hands out to users acts with it:
+    :meth:`get_distribution`, :meth:`predict` and so SB3's ``evaluate_policy``. ACER's rollouts and updates
+    keep using the current weights (:meth:`action_probs`, :meth:`logits_and_q`).
 
     :param observation_space: Observation space
     :param action_space: Action space (``Discrete``)
@@ -92,6 +95,7 @@ class ACERPolicy(BasePolicy):
     :param frame_stack: Number of recent observations the networks see, stacked along the channel axis (1: the
         current one only). The stack is the ``state`` that :meth:`predict` takes and returns, so SB3's
         ``evaluate_policy`` carries it with the env as registered; ACER keeps it during rollouts
+    :param ema: Keep ``ema_net``, the moving average of the weights that the policy acts with outside training
     """
 
     def __init__(
@@ -108,6 +112,7 @@ class ACERPolicy(BasePolicy):
         optimizer_class: type[th.optim.Optimizer] = RMSpropTFLike,
         optimizer_kwargs: Optional[dict[str, Any]] = None,
         frame_stack: int = 1,
+        ema: bool = False,
     ) -> None:
         if frame_stack < 1:
             raise ValueError(f"frame_stack must be >= 1, got {frame_stack}")
@@ -135,6 +140,7 @@ class ACERPolicy(BasePolicy):
         self.ortho_init = ortho_init
         self.n_actions = int(action_space.n)
         self.frame_stack = frame_stack
+        self.ema = ema
         self.net_observation_space = stacked_space(observation_space, frame_stack)  # type: ignore[arg-type]
         self.action_dist = CategoricalDistribution(self.n_actions)
         self._build(lr_schedule)
@@ -153,6 +159,7 @@ class ACERPolicy(BasePolicy):
                 module.apply(partial(self.init_weights, gain=gain))
         self.average_net = copy.deepcopy(self.net)
         self.average_net.requires_grad_(False)
+        self.ema_net = copy.deepcopy(self.net).requires_grad_(False) if self.ema else None
         self.optimizer = self.optimizer_class(self.net.parameters(), lr=lr_schedule(1), **self.optimizer_kwargs)
 
     def _get_constructor_parameters(self) -> dict[str, Any]:
@@ -168,6 +175,7 @@ class ACERPolicy(BasePolicy):
                 optimizer_class=self.optimizer_class,
                 optimizer_kwargs=self.optimizer_kwargs,
                 frame_stack=self.frame_stack,
+                ema=self.ema,
             )
         )
         return data
@@ -178,6 +186,11 @@ class ACERPolicy(BasePolicy):
         :return: Policy logits and Q-values, both of shape (batch, n_actions)
         """
         return self.net(self.extract_features(obs, self.net.features_extractor))
+
+    @property
+    def acting_net(self) -> ACERNetwork:
+        """The network the policy acts with outside training: the moving average where one is kept, else ``net``."""
+        return self.net if self.ema_net is None else self.ema_net
 
     def average_logits(self, obs: PyTorchObs) -> th.Tensor:
         """
@@ -197,12 +210,14 @@ class ACERPolicy(BasePolicy):
 
     def get_distribution(self, obs: PyTorchObs) -> CategoricalDistribution:
         """
-        The current policy's action distribution, as SB3's actor-critic policies expose it.
+        The policy's action distribution, as SB3's actor-critic policies expose it: of the moving average of the
+        weights where one is kept (``ema``), else of the current weights.
 
         :param obs: Observations, as tensors
         :return: A categorical distribution over actions
         """
-        logits = self.net.logits(self.extract_features(obs, self.net.features_extractor))
+        net = self.acting_net
+        logits = net.logits(self.extract_features(obs, net.features_extractor))
         return self.action_dist.proba_distribution(action_logits=logits)
 
     def forward(self, obs: th.Tensor, deterministic: bool = False) -> th.Tensor:
@@ -247,6 +262,21 @@ class ACERPolicy(BasePolicy):
         :param alpha: Decay of the average network (0.99 in the reference)
         """
         polyak_update(self.net.parameters(), self.average_net.parameters(), 1.0 - alpha)
+
+    def update_ema(self, decay: float) -> None:
+        """
+        Move the acting average toward the current weights: ``theta_ema <- decay * theta_ema + (1 - decay) * theta``.
+
+        :param decay: Decay per update, in [0, 1)
+        """
+        if self.ema_net is not None:
+            polyak_update(self.net.parameters(), self.ema_net.parameters(), 1.0 - decay)
+
+    def sync_averages(self) -> None:
+        """Set the average networks to the current weights (after weights were copied into ``net``)."""
+        self.average_net.load_state_dict(self.net.state_dict())
+        if self.ema_net is not None:
+            self.ema_net.load_state_dict(self.net.state_dict())
 
 
 MlpPolicy = ACERPolicy

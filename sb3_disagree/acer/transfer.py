@@ -33,7 +33,7 @@ def load_prior_weights(policy: ACERPolicy, prior_policy: ACERPolicy) -> list[str
     :param prior_policy: The prior's policy
     :return: The names of the parameters copied
     """
-    own, theirs = policy.net.state_dict(), prior_policy.net.state_dict()
+    own, theirs = policy.net.state_dict(), prior_policy.acting_net.state_dict()  # the weights the prior acts with
     copied = []
     for name, value in theirs.items():
         if name.startswith("q_net.") or name.startswith("qf_net."):
@@ -51,5 +51,5 @@ def load_prior_weights(policy: ACERPolicy, prior_policy: ACERPolicy) -> list[str
             target.copy_(value)
         copied.append(name)
     policy.net.load_state_dict(own)
-    policy.average_net.load_state_dict(own)
+    policy.sync_averages()
     return copied

@@ -153,7 +153,7 @@ def train_dagger(
             progress(f"final {final_epochs} epochs: loss {loss:.3f}, accuracy {accuracy:.3f}")
     record.update(final_loss=loss, final_accuracy=accuracy)
     # The average network starts where the imitated policy is, so that ACER fine-tuning begins consistent.
-    policy.average_net.load_state_dict(policy.net.state_dict())
+    policy.sync_averages()
     model.num_timesteps = int(len(y))
     record["seconds"] = round(time.perf_counter() - start, 1)
     return model, record
