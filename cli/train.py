@@ -60,10 +60,13 @@ def _run_options() -> list:
             *options_of(_cli_only)]
 
 
-def _cli_only(card_episodes: int = 20, progress_every: float = 30.0, reward_scale: Optional[float] = None) -> None:
+def _cli_only(card_episodes: int = 20, progress_every: float = 30.0, reward_scale: Optional[float] = None,
+              ema_decay: Optional[float] = None) -> None:
     """
     :param reward_scale: Rewards in ACER's updates are multiplied by this (default: the mode's, 0.1). 1.0 makes
         kickstarting's policy sharper: greedy 0.81-0.93 (mean 0.89) on bathtub after 200k steps (docs/results.md)
+    :param ema_decay: The saved model acts with a moving average of the policy's weights, of this decay per update
+        (default 0: the last weights); learning is unchanged (docs/acer.md, item 22)
     :param card_episodes: Episodes each way (greedy, sampled) of the evaluation on the model card written beside
         model.zip (0: none)
     :param progress_every: Seconds between progress lines when the output is not a terminal
@@ -77,12 +80,14 @@ def train(**options) -> None:
     with clean_errors():
         from sb3_disagree.run import RunConfig, check_resume, train as run, write_card
 
-        out, resume, force, card_episodes, every, reward_scale = (
-            options.pop(k) for k in ("out", "resume", "force", "card_episodes", "progress_every", "reward_scale"))
-        if reward_scale is not None:
-            if options["mode"] == "ppo":
-                raise ValueError("--reward-scale scales ACER's rewards; --mode ppo trains SB3's PPO without it")
-            options["acer_kwargs"] = {"reward_scale": reward_scale}
+        out, resume, force, card_episodes, every = (
+            options.pop(k) for k in ("out", "resume", "force", "card_episodes", "progress_every"))
+        acer = {k: v for k in ("reward_scale", "ema_decay") if (v := options.pop(k)) is not None}
+        if acer and options["mode"] == "ppo":
+            flags = ", ".join("--" + k.replace("_", "-") for k in acer)
+            raise ValueError(f"{flags}: settings of ACER; --mode ppo trains SB3's PPO without them")
+        if acer:
+            options["acer_kwargs"] = acer
         steps = options["steps"]
         config = RunConfig(**{**options, "steps": steps or 100_000, "priors": _priors(options["priors"])})
         config.validate() if resume is None else check_resume(config, resume, force)

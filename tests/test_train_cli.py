@@ -101,17 +101,21 @@ def test_overlap_is_the_default_and_can_be_turned_off(zoo, tmp_path):
         assert ACER.load(run / "model.zip").overlap is overlap
 
 
-def test_reward_scale_reaches_acer_and_keeps_the_other_defaults(zoo, tmp_path):
+def test_reward_scale_and_ema_decay_reach_acer_and_keep_the_other_defaults(zoo, tmp_path):
     from sb3_disagree.run import ACER_KWARGS
 
-    result = runner.invoke(app, _train_args(zoo, tmp_path, "--mode", "kickstart", "--reward-scale", "1"))
+    result = runner.invoke(app, _train_args(zoo, tmp_path, "--mode", "kickstart", "--reward-scale", "1",
+                                            "--ema-decay", "0.99"))
     assert result.exit_code == 0, result.output
     run = tmp_path / "sb3_disagree__ApartmentState-v0" / "bathtub" / "kickstart-0"
-    assert yaml.safe_load((run / "config.yaml").read_text())["acer_kwargs"] == {**ACER_KWARGS, "reward_scale": 1.0}
-    assert ACER.load(run / "model.zip").reward_scale == 1.0
-    # A resumed run keeps the scale it was trained with.
-    result = runner.invoke(app, ["train", "--goal", "bathtub", "--resume", str(run), "--reward-scale", "0.5"])
-    assert result.exit_code == 2 and "drop --reward-scale" in result.output, result.output
+    assert yaml.safe_load((run / "config.yaml").read_text())["acer_kwargs"] == {**ACER_KWARGS, "reward_scale": 1.0,
+                                                                                 "ema_decay": 0.99}
+    model = ACER.load(run / "model.zip")
+    assert model.reward_scale == 1.0 and model.ema_decay == 0.99 and model.policy.ema_net is not None
+    # A resumed run keeps the settings it was trained with.
+    for flag in ("--reward-scale", "--ema-decay"):
+        result = runner.invoke(app, ["train", "--goal", "bathtub", "--resume", str(run), flag, "0.5"])
+        assert result.exit_code == 2 and f"drop {flag}" in result.output, result.output
 
 
 def test_overlap_trains_evaluates_and_resumes(zoo, tmp_path):
@@ -224,7 +228,9 @@ def test_resumed_run_appends_to_its_history(zoo, tmp_path):
     (["--env", "sb3_disagree/Castle-v0"], "unknown environment"),
     (["--eval-every", "-5"], "--eval-every must be >= 0"),
     (["--reward-scale", "0"], "--reward-scale must be a number > 0"),
-    (["--reward-scale", "1", "--mode", "ppo"], "--mode ppo trains SB3's PPO without it"),
+    (["--reward-scale", "1", "--mode", "ppo"], "--reward-scale: settings of ACER; --mode ppo trains SB3's PPO"),
+    (["--ema-decay", "1"], "--ema-decay must be a number in [0, 1)"),
+    (["--ema-decay", "0.9", "--mode", "ppo"], "--ema-decay: settings of ACER; --mode ppo trains SB3's PPO"),
 ])
 def test_bad_input_is_a_message_and_exit_code_2(zoo, tmp_path, extra, message):
     result = runner.invoke(app, _train_args(zoo, tmp_path, *extra))
