@@ -82,12 +82,7 @@ def train(**options) -> None:
 
         out, resume, force, card_episodes, every = (
             options.pop(k) for k in ("out", "resume", "force", "card_episodes", "progress_every"))
-        acer = {k: v for k in ("reward_scale", "ema_decay") if (v := options.pop(k)) is not None}
-        if acer and options["mode"] == "ppo":
-            flags = ", ".join("--" + k.replace("_", "-") for k in acer)
-            raise ValueError(f"{flags}: settings of ACER; --mode ppo trains SB3's PPO without them")
-        if acer:
-            options["acer_kwargs"] = acer
+        options["acer_kwargs"] = {k: v for k in ("reward_scale", "ema_decay") if (v := options.pop(k)) is not None}
         steps = options["steps"]
         config = RunConfig(**{**options, "steps": steps or 100_000, "priors": _priors(options["priors"])})
         config.validate() if resume is None else check_resume(config, resume, force)

@@ -148,6 +148,11 @@ class RunConfig:
                              f"{self.greedy_phase} and {self.greedy_epsilon}")
         if self.greedy_phase and self.mode == "ppo":
             raise ValueError("--greedy-phase is a behaviour of ACER; --mode ppo trains SB3's PPO without one")
+        if self.mode == "ppo":  # ACER's settings beyond the defaults (--reward-scale, --ema-decay) would be ignored
+            given = [k for k, v in self.acer_kwargs.items() if acer_defaults(self.mode).get(k) != v]
+            if given:
+                flags = ", ".join("--" + k.replace("_", "-") for k in given)
+                raise ValueError(f"{flags}: settings of ACER; --mode ppo trains SB3's PPO without them")
         reward_scale = self.acer_kwargs.get("reward_scale", 1.0)
         if isinstance(reward_scale, bool) or not isinstance(reward_scale, (int, float)) or not reward_scale > 0:
             raise ValueError(f"--reward-scale must be a number > 0, got {reward_scale!r}")
