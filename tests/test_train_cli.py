@@ -306,3 +306,16 @@ def test_a_model_card_beside_the_model_and_priors_add_reads_it(zoo, tmp_path):
     result = runner.invoke(app, ["priors", "add", str(run / "model.zip"), "--zoo", str(other), "--episodes", "0",
                                  "--replace"])
     assert result.exit_code == 2 and "--env sb3_disagree/ApartmentState-v0" in " ".join(result.output.split())
+
+
+def test_evaluations_along_the_way_leave_training_unchanged(zoo, tmp_path):
+    """The periodic evaluations draw from their own random stream: a run that evaluates trains the same weights."""
+    import torch as th
+
+    weights = []
+    for eval_every in (0, 250):
+        config = RunConfig(goal="bathtub", env_id=STATE_ID, steps=600, n_envs=2, zoo=str(zoo), eval_every=eval_every,
+                           eval_episodes=2, acer_kwargs={"replay_start": 100})
+        _, model, _ = train(config, tmp_path / str(eval_every))
+        weights.append(th.nn.utils.parameters_to_vector(model.policy.net.parameters()).detach())
+    assert th.equal(weights[0], weights[1])

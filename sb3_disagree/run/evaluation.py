@@ -5,6 +5,7 @@ from pathlib import Path
 from typing import Any, Optional
 
 import numpy as np
+import torch as th
 import yaml
 from stable_baselines3.common.callbacks import BaseCallback
 
@@ -50,8 +51,12 @@ class EvaluateAlone(BaseCallback):
         if self.env is None:
             self.env = build_env(self.config, None, n_envs=min(self.config.n_envs, 4),
                                  seed=self.config.seed + EVAL_SEED_OFFSET, vec_env="dummy")
-        sampled = evaluate(self.model, self.env, self.config.eval_episodes, deterministic=False)
-        greedy = evaluate(self.model, self.env, self.config.eval_episodes, deterministic=True)
+        # On a forked random stream: the sampled episodes' draws would otherwise shift training's, so that runs
+        # differing only in what they evaluate (an average to act with, say) would drift apart.
+        device = self.model.device
+        with th.random.fork_rng(devices=[device.index or 0] if device.type == "cuda" else []):
+            sampled = evaluate(self.model, self.env, self.config.eval_episodes, deterministic=False)
+            greedy = evaluate(self.model, self.env, self.config.eval_episodes, deterministic=True)
         per = sampled.per_episode
         for key, value in zip(self.KEYS, (self.num_timesteps, per["successes"], greedy.per_episode["successes"],
                                           per["returns"], per["lengths"])):
