@@ -82,6 +82,19 @@ def test_reward_closing_distance_and_step_into_wall():
     assert info["heading"] == pytest.approx(0.0)
 
 
+def test_collision_penalty_only_on_blocked_moves():
+    env = ApartmentEnv(goal="bathtub", obs="state", collision_penalty=0.1)
+    env.reset(seed=0)
+    env.set_pose(3.0, 4.0, EAST)  # 0.5 m from the bathroom's east wall: blocked
+    _, r, *_, info = env.step(MOVE_FORWARD)
+    assert info["position"] == (3.0, 4.0) and r == pytest.approx(-0.01 - 0.1)
+    _, r, *_ = env.step(TURN_LEFT)  # a turn is never a collision
+    assert r == pytest.approx(-0.01)
+    env.set_pose(2.3, 4.0, SOUTH)  # a free move: the paper's reward, no penalty
+    _, r, *_ = env.step(MOVE_FORWARD)
+    assert r == pytest.approx(0.25 - 0.01)
+
+
 def test_reaching_the_goal_pays_and_terminates():
     env = ApartmentEnv(goal="bathtub", obs="state")
     env.reset(seed=0)

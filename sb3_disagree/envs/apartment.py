@@ -39,7 +39,8 @@ class ApartmentEnv(NavigationEnv):
     ## Rewards
 
     Each step: the decrease of the Euclidean distance to the goal object, minus ``step_penalty`` (0.01);
-    plus ``success_reward`` (10) on reaching it.
+    plus ``success_reward`` (10) on reaching it; minus ``collision_penalty`` (0 by default) when a move_forward
+    is blocked.
 
     ## Starting State
 
@@ -63,6 +64,7 @@ class ApartmentEnv(NavigationEnv):
     :param turn_step: Angle of one turn, in degrees
     :param step_penalty: Subtracted from the reward every step
     :param success_reward: Added on reaching the goal
+    :param collision_penalty: Subtracted when move_forward is blocked (0 by default, as in the paper)
     :param render_mode: "rgb_array" makes ``render()`` return the top-down map with the episode's path
     :param layout: The apartment; the paper's by default
     """
@@ -80,6 +82,7 @@ class ApartmentEnv(NavigationEnv):
         turn_step: float = 30.0,
         step_penalty: float = 0.01,
         success_reward: float = 10.0,
+        collision_penalty: float = 0.0,
         render_mode: Optional[str] = None,
         layout: Optional[Layout] = None,
     ) -> None:
@@ -95,6 +98,7 @@ class ApartmentEnv(NavigationEnv):
         self.turn_step = math.radians(turn_step)
         self.step_penalty = step_penalty
         self.success_reward = success_reward
+        self.collision_penalty = collision_penalty
         self.render_mode = render_mode
         self.reach = self.goal.radius + self.layout.agent_radius + 1.1 * forward_step
         self.action_space = spaces.Discrete(3)

@@ -1,6 +1,7 @@
 """
 What the apartment and the scans share: Habitat-style actions on a pose (x, z, heading), the reward
-(decrease of a distance to the goal, a step penalty, a success bonus), truncation, and the interface the
+(decrease of a distance to the goal, a step penalty, a success bonus, an optional penalty for a blocked move),
+truncation, and the interface the
 grid expert reads.
 """
 
@@ -33,6 +34,9 @@ class NavigationEnv(gym.Env):
     success_reward: float
     max_episode_steps: int
     reach: float
+    # Subtracted when move_forward is blocked (0: the paper's reward). With the distance reward alone a blocked
+    # move costs one step penalty, so pressing into a wall is nearly free and a greedy policy can stay there.
+    collision_penalty: float = 0.0
 
     def _init_pose(self) -> None:
         self._expert = None
@@ -83,7 +87,7 @@ class NavigationEnv(gym.Env):
         action = int(action)
         if not self.action_space.contains(action):
             raise ValueError(f"invalid action {action}; actions are 0 turn left, 1 turn right, 2 move forward")
-        before = self.distance
+        before, collided = self.distance, False
         if action == TURN_LEFT:
             self.heading = wrap(self.heading + self.turn_step)
         elif action == TURN_RIGHT:
@@ -91,12 +95,15 @@ class NavigationEnv(gym.Env):
         else:
             x = self.x + self.forward_step * math.cos(self.heading)
             z = self.z - self.forward_step * math.sin(self.heading)
-            if not self.blocked(x, z):
+            collided = self.blocked(x, z)
+            if not collided:
                 self.x, self.z = x, z
         self.step_count += 1
         self.path.append((self.x, self.z))
         success = self.reached()
         reward = before - self.distance - self.step_penalty + (self.success_reward if success else 0.0)
+        if collided:
+            reward -= self.collision_penalty
         truncated = not success and self.step_count >= self.max_episode_steps
         return self._obs(), reward, success, truncated, self._info(success)
 

@@ -62,7 +62,8 @@ class ScanEnv(NavigationEnv):
     ## Rewards
 
     Each step: the decrease of the geodesic distance to the goal (the shortest path through the navigable
-    grid), minus ``step_penalty`` (0.01); plus ``success_reward`` (10) on reaching it.
+    grid), minus ``step_penalty`` (0.01); plus ``success_reward`` (10) on reaching it; minus ``collision_penalty``
+    (0 by default) when a move_forward is blocked.
 
     ## Starting State
 
@@ -91,6 +92,7 @@ class ScanEnv(NavigationEnv):
     :param cell: Resolution of the navigable grid, in metres
     :param step_penalty: Subtracted from the reward every step
     :param success_reward: Added on reaching the goal
+    :param collision_penalty: Subtracted when move_forward is blocked (0 by default, as in the paper)
     """
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": 10}
@@ -111,6 +113,7 @@ class ScanEnv(NavigationEnv):
         cell: float = 0.1,
         step_penalty: float = 0.01,
         success_reward: float = 10.0,
+        collision_penalty: float = 0.0,
         render_mode: Optional[str] = None,
     ) -> None:
         self.scene_path = str(Path(scene) if scene is not None else DEFAULT_SCENE)
@@ -128,6 +131,7 @@ class ScanEnv(NavigationEnv):
         self.turn_step = math.radians(turn_step)
         self.agent_radius, self.cell = agent_radius, cell
         self.step_penalty, self.success_reward = step_penalty, success_reward
+        self.collision_penalty = collision_penalty
         self.reach = self.goal.radius
         self.meshes, self.grid = _scene(self.scene_path, cell, agent_radius)
         self.field = _field(self.scene_path, cell, agent_radius, self.goal.x, self.goal.z, self.goal.radius)
