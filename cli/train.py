@@ -63,10 +63,12 @@ def _run_options() -> list:
 def _cli_only(card_episodes: int = 20, progress_every: float = 30.0, reward_scale: Optional[float] = None,
               ema_decay: Optional[float] = None) -> None:
     """
-    :param reward_scale: Rewards in ACER's updates are multiplied by this (default: the mode's, 0.1). 1.0 makes
-        kickstarting's policy sharper: greedy 0.81-0.93 (mean 0.89) on bathtub after 200k steps (docs/results.md)
+    :param reward_scale: Rewards in ACER's updates are multiplied by this (default: the mode's; 1.0 for
+        kickstarting, 0.1 for the others). At 1.0 kickstarting's policy is sharper, its argmax a real choice
+        (docs/results.md)
     :param ema_decay: The saved model acts with a moving average of the policy's weights, of this decay per update
-        (default 0: the last weights); learning is unchanged (docs/acer.md, item 22)
+        (default: the mode's; 0.999 for kickstarting, 0 (the last weights) for the others); learning is unchanged
+        (docs/acer.md, item 22)
     :param card_episodes: Episodes each way (greedy, sampled) of the evaluation on the model card written beside
         model.zip (0: none)
     :param progress_every: Seconds between progress lines when the output is not a terminal

@@ -353,6 +353,18 @@ def test_a_cells_mode_picks_acers_defaults_and_the_grid_and_cell_go_on_top(tmp_p
     assert acer["default"] == RunConfig(goal="bathtub", acer_kwargs={"ent_coef": 0.02}).acer_kwargs
 
 
+def test_a_record_older_than_an_acer_setting_ran_at_acers_default():
+    from sb3_disagree.experiments.spec import _differing
+    from sb3_disagree.run import RunConfig
+
+    pinned = RunConfig(goal="bathtub", mode="kickstart", acer_kwargs={"reward_scale": 0.1, "ema_decay": 0.0})
+    saved = {**pinned.__dict__, "acer_kwargs": {k: v for k, v in pinned.acer_kwargs.items() if k != "ema_decay"}}
+    assert _differing(saved, pinned) == []  # written before ema_decay existed: it ran without an average
+    averaged = RunConfig(goal="bathtub", mode="kickstart", acer_kwargs={"reward_scale": 0.1, "ema_decay": 0.999})
+    assert _differing(saved, averaged) == ["acer_kwargs"]
+    assert _differing({**saved, "acer_kwargs": {**saved["acer_kwargs"], "reward_scale": 1.0}}, pinned) == ["acer_kwargs"]
+
+
 def test_the_reports_acer_line_names_what_most_cells_have_and_what_each_sets_itself():
     from types import SimpleNamespace
 

@@ -31,6 +31,7 @@ copied (runs are deterministic given their configuration and seed) instead of tr
 another configuration is an error, and one not finished yet is trained here.
 """
 
+import inspect
 import json
 from dataclasses import MISSING, asdict, dataclass, field
 from pathlib import Path
@@ -53,7 +54,19 @@ def _differing(saved: dict[str, Any], config: RunConfig, ignore: tuple[str, ...]
     record ran at its default), leaving out ``ignore`` and what only changes the output."""
     defaults = {k: f.default for k, f in RunConfig.__dataclass_fields__.items() if f.default is not MISSING}
     wanted = asdict(config)
+    saved = {**saved}
+    if config.mode != "ppo" and isinstance(saved.get("acer_kwargs"), dict):  # likewise an ACER setting
+        saved["acer_kwargs"] = {**_acer_signature_defaults(), **saved["acer_kwargs"]}
+        wanted["acer_kwargs"] = {**_acer_signature_defaults(), **wanted["acer_kwargs"]}
     return [k for k in wanted if k not in (*ignore, *OUTPUT_ONLY) and saved.get(k, defaults.get(k)) != wanted[k]]
+
+
+def _acer_signature_defaults() -> dict[str, Any]:
+    """ACER's own keyword defaults (what a run that did not name a setting trained with)."""
+    from sb3_disagree.acer import ACER
+
+    return {name: p.default for name, p in inspect.signature(ACER.__init__).parameters.items()
+            if p.default is not inspect.Parameter.empty and isinstance(p.default, (int, float, str, bool))}
 
 
 @dataclass
