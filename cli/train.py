@@ -61,7 +61,7 @@ def _run_options() -> list:
 
 
 def _cli_only(card_episodes: int = 20, progress_every: float = 30.0, reward_scale: Optional[float] = None,
-              ema_decay: Optional[float] = None) -> None:
+              ema_decay: Optional[float] = None, collision_penalty: Optional[float] = None) -> None:
     """
     :param reward_scale: Rewards in ACER's updates are multiplied by this (default: the mode's; 1.0 for
         kickstarting, 0.1 for the others). At 1.0 kickstarting's policy is sharper, its argmax a real choice
@@ -69,6 +69,8 @@ def _cli_only(card_episodes: int = 20, progress_every: float = 30.0, reward_scal
     :param ema_decay: The saved model acts with a moving average of the policy's weights, of this decay per update
         (default: the mode's; 0.999 for kickstarting, 0 (the last weights) for the others); learning is unchanged
         (docs/acer.md, item 22)
+    :param collision_penalty: Subtracted from the env's reward on a blocked move_forward (the env's
+        collision_penalty; default 0, the paper's reward); what counts as success is unchanged
     :param card_episodes: Episodes each way (greedy, sampled) of the evaluation on the model card written beside
         model.zip (0: none)
     :param progress_every: Seconds between progress lines when the output is not a terminal
@@ -85,6 +87,7 @@ def train(**options) -> None:
         out, resume, force, card_episodes, every = (
             options.pop(k) for k in ("out", "resume", "force", "card_episodes", "progress_every"))
         options["acer_kwargs"] = {k: v for k in ("reward_scale", "ema_decay") if (v := options.pop(k)) is not None}
+        options["env_kwargs"] = {k: v for k in ("collision_penalty",) if (v := options.pop(k)) is not None}
         steps = options["steps"]
         config = RunConfig(**{**options, "steps": steps or 100_000, "priors": _priors(options["priors"])})
         config.validate() if resume is None else check_resume(config, resume, force)

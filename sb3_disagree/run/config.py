@@ -162,6 +162,9 @@ class RunConfig:
             raise ValueError(f"--ema-decay must be a number in [0, 1), got {ema_decay!r}")
         if self.eval_every < 0 or self.eval_episodes < 1:
             raise ValueError("--eval-every must be >= 0 and --eval-episodes positive")
+        penalty = self.env_kwargs.get("collision_penalty", 0.0)
+        if isinstance(penalty, bool) or not isinstance(penalty, (int, float)) or not penalty >= 0:
+            raise ValueError(f"--collision-penalty must be a number >= 0, got {penalty!r}")
 
     def _check_types(self) -> None:
         """Every field of the type it is declared with (a YAML grid or a saved config can hold anything)."""

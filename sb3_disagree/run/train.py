@@ -160,7 +160,8 @@ def check_resume(config: RunConfig, resume: Path, force: bool = False) -> None:
     # ACER's settings beyond the mode's defaults (on the command line, --reward-scale)
     given += [key for key, value in config.acer_kwargs.items() if acer_defaults(config.mode).get(key) != value]
     if given:
-        flags = ", ".join({"env_id": "--env"}.get(name, "--" + name.replace("_", "-")) for name in given)
+        flags = ", ".join({"env_id": "--env", "env_kwargs": "--collision-penalty"}.get(name, "--" + name.replace("_", "-"))
+                          for name in given)
         raise ValueError(f"--resume continues {resume} with its saved settings; drop {flags}")
 
 def _resumed_model(config: RunConfig, run_dir: Path, env, behaviour, checkpoint):
