@@ -1,8 +1,7 @@
 """
 What the apartment and the scans share: Habitat-style actions on a pose (x, z, heading), the reward
 (decrease of a distance to the goal, a step penalty, a success bonus, an optional penalty for a blocked move),
-truncation, and the interface the
-grid expert reads.
+truncation, and the interface the grid expert reads.
 """
 
 import math
