@@ -54,10 +54,10 @@ def _differing(saved: dict[str, Any], config: RunConfig, ignore: tuple[str, ...]
     record ran at its default), leaving out ``ignore`` and what only changes the output."""
     defaults = {k: f.default for k, f in RunConfig.__dataclass_fields__.items() if f.default is not MISSING}
     wanted = asdict(config)
-    saved = {**saved}
-    if config.mode != "ppo" and isinstance(saved.get("acer_kwargs"), dict):  # likewise an ACER setting
-        saved["acer_kwargs"] = {**_acer_signature_defaults(), **saved["acer_kwargs"]}
-        wanted["acer_kwargs"] = {**_acer_signature_defaults(), **wanted["acer_kwargs"]}
+    if isinstance(saved.get("acer_kwargs"), dict):  # likewise an ACER setting: the record ran at ACER's default
+        acer = _acer_signature_defaults()
+        saved = {**saved, "acer_kwargs": {**acer, **saved["acer_kwargs"]}}
+        wanted["acer_kwargs"] = {**acer, **wanted["acer_kwargs"]}
     return [k for k in wanted if k not in (*ignore, *OUTPUT_ONLY) and saved.get(k, defaults.get(k)) != wanted[k]]
 
 
