@@ -61,7 +61,8 @@ def _run_options() -> list:
 
 
 def _cli_only(card_episodes: int = 20, progress_every: float = 30.0, reward_scale: Optional[float] = None,
-              ema_decay: Optional[float] = None, collision_penalty: Optional[float] = None) -> None:
+              ema_decay: Optional[float] = None, collision_penalty: Optional[float] = None,
+              reward_distance: Optional[str] = None) -> None:
     """
     :param reward_scale: Rewards in ACER's updates are multiplied by this (default: the mode's; 1.0 for
         kickstarting, 0.1 for the others). At 1.0 kickstarting's policy is sharper, its argmax a real choice
@@ -71,6 +72,9 @@ def _cli_only(card_episodes: int = 20, progress_every: float = 30.0, reward_scal
         (docs/acer.md, item 22)
     :param collision_penalty: Subtracted from the env's reward on a blocked move_forward (the env's
         collision_penalty; default 0, the paper's reward); what counts as success is unchanged
+    :param reward_distance: What the env's reward distance follows: "euclidean" (the apartment's default, the
+        paper's straight line) or "geodesic" (the shortest free path; the office scans always use it); what counts
+        as success is unchanged
     :param card_episodes: Episodes each way (greedy, sampled) of the evaluation on the model card written beside
         model.zip (0: none)
     :param progress_every: Seconds between progress lines when the output is not a terminal
@@ -87,7 +91,7 @@ def train(**options) -> None:
         out, resume, force, card_episodes, every = (
             options.pop(k) for k in ("out", "resume", "force", "card_episodes", "progress_every"))
         options["acer_kwargs"] = {k: v for k in ("reward_scale", "ema_decay") if (v := options.pop(k)) is not None}
-        options["env_kwargs"] = {k: v for k in ("collision_penalty",) if (v := options.pop(k)) is not None}
+        options["env_kwargs"] = {k: v for k in ("collision_penalty", "reward_distance") if (v := options.pop(k)) is not None}
         steps = options["steps"]
         config = RunConfig(**{**options, "steps": steps or 100_000, "priors": _priors(options["priors"])})
         config.validate() if resume is None else check_resume(config, resume, force)

@@ -95,6 +95,36 @@ def test_collision_penalty_only_on_blocked_moves():
     assert r == pytest.approx(0.25 - 0.01)
 
 
+def test_geodesic_reward_follows_the_free_path_not_the_straight_line():
+    straight = ApartmentEnv(goal="bathtub", obs="state")
+    free_path = ApartmentEnv(goal="bathtub", obs="state", reward_distance="geodesic")
+    for env in (straight, free_path):
+        env.reset(seed=0)
+    # In the corridor right below the bathtub (2.3, 6.6) the bathroom wall is in the way; the door is at x in [-0.75, 0.75].
+    below, door = (2.3, 0.0), (0.0, 0.0)
+    distances = {}
+    for env in (straight, free_path):
+        for name, (x, z) in (("below", below), ("door", door)):
+            env.set_pose(x, z, WEST)
+            distances[env.reward_distance, name] = env.distance
+    assert distances["euclidean", "below"] == pytest.approx(6.6)
+    assert distances["euclidean", "below"] < distances["euclidean", "door"]
+    # The free path from below the bathtub runs back through the door (2.3 m west); the geodesic distance is to the
+    # reach circle, so never shorter than the straight line less the reach.
+    assert distances["geodesic", "below"] > distances["geodesic", "door"] + 1.0
+    for name in ("below", "door"):
+        assert distances["geodesic", name] >= distances["euclidean", name] - free_path.reach
+    # One step west, toward the door: the straight line calls it a loss, the free path a gain of about a step.
+    for env in (straight, free_path):
+        env.set_pose(*below, WEST)
+    _, r_straight, *_ = straight.step(MOVE_FORWARD)
+    _, r_free, *_ = free_path.step(MOVE_FORWARD)
+    assert r_straight == pytest.approx(6.6 - math.hypot(0.25, 6.6) - 0.01)
+    assert 0.25 - 0.05 < r_free + 0.01 <= 0.25 + 1e-6
+    with pytest.raises(ValueError, match="reward_distance"):
+        ApartmentEnv(goal="bathtub", obs="state", reward_distance="manhattan")
+
+
 def test_reaching_the_goal_pays_and_terminates():
     env = ApartmentEnv(goal="bathtub", obs="state")
     env.reset(seed=0)

@@ -105,17 +105,19 @@ def test_reward_scale_and_ema_decay_reach_acer_and_keep_the_other_defaults(zoo, 
     from sb3_disagree.run import ACER_KWARGS
 
     result = runner.invoke(app, _train_args(zoo, tmp_path, "--mode", "kickstart", "--reward-scale", "1",
-                                            "--ema-decay", "0.99", "--collision-penalty", "0.1"))
+                                            "--ema-decay", "0.99", "--collision-penalty", "0.1",
+                                            "--reward-distance", "geodesic"))
     assert result.exit_code == 0, result.output
     run = tmp_path / "sb3_disagree__ApartmentState-v0" / "bathtub" / "kickstart-0"
     saved = yaml.safe_load((run / "config.yaml").read_text())
     assert saved["acer_kwargs"] == {**ACER_KWARGS, "reward_scale": 1.0, "ema_decay": 0.99}
-    assert saved["env_kwargs"] == {"collision_penalty": 0.1}
+    assert saved["env_kwargs"] == {"collision_penalty": 0.1, "reward_distance": "geodesic"}
     model = ACER.load(run / "model.zip")
     assert model.reward_scale == 1.0 and model.ema_decay == 0.99 and model.policy.ema_net is not None
     # A resumed run keeps the settings it was trained with.
-    for flag in ("--reward-scale", "--ema-decay", "--collision-penalty"):
-        result = runner.invoke(app, ["train", "--goal", "bathtub", "--resume", str(run), flag, "0.5"])
+    for flag, value in (("--reward-scale", "0.5"), ("--ema-decay", "0.5"), ("--collision-penalty", "0.5"),
+                        ("--reward-distance", "euclidean")):
+        result = runner.invoke(app, ["train", "--goal", "bathtub", "--resume", str(run), flag, value])
         assert result.exit_code == 2 and f"drop {flag}" in result.output, result.output
 
 
@@ -233,6 +235,7 @@ def test_resumed_run_appends_to_its_history(zoo, tmp_path):
     (["--ema-decay", "1"], "--ema-decay must be a number in [0, 1)"),
     (["--ema-decay", "0.9", "--mode", "ppo"], "--ema-decay: settings of ACER; --mode ppo trains SB3's PPO"),
     (["--collision-penalty", "-1"], "--collision-penalty must be a number >= 0"),
+    (["--reward-distance", "manhattan"], "--reward-distance must be euclidean or geodesic"),
 ])
 def test_bad_input_is_a_message_and_exit_code_2(zoo, tmp_path, extra, message):
     result = runner.invoke(app, _train_args(zoo, tmp_path, *extra))

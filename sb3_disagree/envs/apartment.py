@@ -38,9 +38,10 @@ class ApartmentEnv(NavigationEnv):
 
     ## Rewards
 
-    Each step: the decrease of the Euclidean distance to the goal object, minus ``step_penalty`` (0.01);
-    plus ``success_reward`` (10) on reaching it; minus ``collision_penalty`` (0 by default) when a move_forward
-    is blocked.
+    Each step: the decrease of the distance to the goal object, minus ``step_penalty`` (0.01); plus
+    ``success_reward`` (10) on reaching it; minus ``collision_penalty`` (0 by default) when a move_forward is
+    blocked. The distance is Euclidean by default (``reward_distance="euclidean"``); ``"geodesic"`` follows
+    the shortest free path instead (through the doorways, around walls and objects), as the office scans do.
 
     ## Starting State
 
@@ -65,6 +66,8 @@ class ApartmentEnv(NavigationEnv):
     :param step_penalty: Subtracted from the reward every step
     :param success_reward: Added on reaching the goal
     :param collision_penalty: Subtracted when move_forward is blocked (0 by default, as in the paper)
+    :param reward_distance: "euclidean" (the straight line to the goal) or "geodesic" (the shortest free path,
+        the grid expert's distance field): what the reward's distance follows; success is the same either way
     :param render_mode: "rgb_array" makes ``render()`` return the top-down map with the episode's path
     :param layout: The apartment; the paper's by default
     """
@@ -83,6 +86,7 @@ class ApartmentEnv(NavigationEnv):
         step_penalty: float = 0.01,
         success_reward: float = 10.0,
         collision_penalty: float = 0.0,
+        reward_distance: str = "euclidean",
         render_mode: Optional[str] = None,
         layout: Optional[Layout] = None,
     ) -> None:
@@ -90,6 +94,8 @@ class ApartmentEnv(NavigationEnv):
         self.goal = self.layout.object(goal)
         if obs not in ("rgb", "state"):
             raise ValueError(f"obs must be 'rgb' or 'state', got {obs!r}")
+        if reward_distance not in ("euclidean", "geodesic"):
+            raise ValueError(f"reward_distance must be 'euclidean' or 'geodesic', got {reward_distance!r}")
         if render_mode not in (None, "rgb_array"):
             raise ValueError(f"render_mode must be None or 'rgb_array', got {render_mode!r}")
         self.obs_mode = obs
@@ -99,6 +105,7 @@ class ApartmentEnv(NavigationEnv):
         self.step_penalty = step_penalty
         self.success_reward = success_reward
         self.collision_penalty = collision_penalty
+        self.reward_distance = reward_distance
         self.render_mode = render_mode
         self.reach = self.goal.radius + self.layout.agent_radius + 1.1 * forward_step
         self.action_space = spaces.Discrete(3)
@@ -123,6 +130,8 @@ class ApartmentEnv(NavigationEnv):
 
     @property
     def distance(self) -> float:
+        if self.reward_distance == "geodesic":
+            return self.nav_field().cost(self.x, self.z)
         return math.hypot(self.goal.x - self.x, self.goal.z - self.z)
 
     def _obs(self) -> np.ndarray:

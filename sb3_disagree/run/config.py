@@ -165,6 +165,8 @@ class RunConfig:
         penalty = self.env_kwargs.get("collision_penalty", 0.0)
         if isinstance(penalty, bool) or not isinstance(penalty, (int, float)) or not penalty >= 0:
             raise ValueError(f"--collision-penalty must be a number >= 0, got {penalty!r}")
+        if self.env_kwargs.get("reward_distance", "euclidean") not in ("euclidean", "geodesic"):
+            raise ValueError(f"--reward-distance must be euclidean or geodesic, got {self.env_kwargs['reward_distance']!r}")
 
     def _check_types(self) -> None:
         """Every field of the type it is declared with (a YAML grid or a saved config can hold anything)."""

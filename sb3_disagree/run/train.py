@@ -160,8 +160,9 @@ def check_resume(config: RunConfig, resume: Path, force: bool = False) -> None:
     # ACER's settings beyond the mode's defaults (on the command line, --reward-scale)
     given += [key for key, value in config.acer_kwargs.items() if acer_defaults(config.mode).get(key) != value]
     if given:
-        flags = ", ".join({"env_id": "--env", "env_kwargs": "--collision-penalty"}.get(name, "--" + name.replace("_", "-"))
-                          for name in given)
+        # env_kwargs come from the env's own flags (--collision-penalty, --reward-distance): name those given
+        given = [k for name in given for k in (config.env_kwargs if name == "env_kwargs" else [name])]
+        flags = ", ".join("--env" if name == "env_id" else "--" + name.replace("_", "-") for name in given)
         raise ValueError(f"--resume continues {resume} with its saved settings; drop {flags}")
 
 def _resumed_model(config: RunConfig, run_dir: Path, env, behaviour, checkpoint):
