@@ -128,6 +128,9 @@ def test_unknown_goal_and_missing_scene_are_clear_errors(rooms, tmp_path):
         ScanEnv(goal="sink", scene=rooms)
     with pytest.raises(FileNotFoundError, match="no scene"):
         ScanEnv(goal="east", scene=tmp_path / "nothing.glb")
+    with pytest.raises(ValueError, match="geodesic distance only"):
+        ScanEnv(goal="east", scene=rooms, reward_distance="euclidean")
+    assert ScanEnv(goal="east", scene=rooms, obs="state", reward_distance="geodesic").reward_distance == "geodesic"
 
 
 def test_every_goal_of_the_shipped_office_is_reachable():

@@ -93,6 +93,8 @@ class ScanEnv(NavigationEnv):
     :param step_penalty: Subtracted from the reward every step
     :param success_reward: Added on reaching the goal
     :param collision_penalty: Subtracted when move_forward is blocked (0 by default, as in the paper)
+    :param reward_distance: "geodesic", the only distance a scan's reward follows (the argument exists so that
+        the apartment's ``reward_distance`` can be passed to either env)
     """
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": 10}
@@ -114,8 +116,11 @@ class ScanEnv(NavigationEnv):
         step_penalty: float = 0.01,
         success_reward: float = 10.0,
         collision_penalty: float = 0.0,
+        reward_distance: str = "geodesic",
         render_mode: Optional[str] = None,
     ) -> None:
+        if reward_distance != "geodesic":
+            raise ValueError(f"a scan's reward follows the geodesic distance only, got reward_distance={reward_distance!r}")
         self.scene_path = str(Path(scene) if scene is not None else DEFAULT_SCENE)
         if not Path(self.scene_path).exists():
             raise FileNotFoundError(f"no scene at {self.scene_path}")
@@ -132,6 +137,7 @@ class ScanEnv(NavigationEnv):
         self.agent_radius, self.cell = agent_radius, cell
         self.step_penalty, self.success_reward = step_penalty, success_reward
         self.collision_penalty = collision_penalty
+        self.reward_distance = reward_distance
         self.reach = self.goal.radius
         self.meshes, self.grid = _scene(self.scene_path, cell, agent_radius)
         self.field = _field(self.scene_path, cell, agent_radius, self.goal.x, self.goal.z, self.goal.radius)
