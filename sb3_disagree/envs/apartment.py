@@ -115,6 +115,7 @@ class ApartmentEnv(NavigationEnv):
             self.observation_space = spaces.Box(-1.0, 1.0, (4,), dtype=np.float32)
         self._obs_size = (obs_width, obs_height)
         self._renderer = None
+        self._nav_field = None
         self._init_pose()
 
     # ------------------------------------------------------------------ pose and observation
@@ -159,9 +160,12 @@ class ApartmentEnv(NavigationEnv):
         return self.layout.blocked(x, z)
 
     def nav_field(self):
-        from sb3_disagree.envs.expert import layout_field
+        # Kept on the env: with the geodesic reward it is read twice a step, and the shared cache hashes the layout.
+        if self._nav_field is None:
+            from sb3_disagree.envs.expert import layout_field
 
-        return layout_field(self.layout, self.goal.name, self.reach)
+            self._nav_field = layout_field(self.layout, self.goal.name, self.reach)
+        return self._nav_field
 
     def _sample_pose(self) -> tuple[float, float, float]:
         c, r = self.layout.corridor, self.layout.agent_radius
