@@ -36,6 +36,7 @@ from sb3_disagree.cli import train as _train  # noqa: E402
 
 app.command("train")(_train.train)
 app.command("eval")(_train.eval_run)
+app.command("consistency")(_train.consistency)
 app.add_typer(_priors.app, name="priors")
 app.command("similarity")(_priors.similarity)
 app.add_typer(_experiment.app, name="experiment")

@@ -195,3 +195,28 @@ def _draw(run_dir: Path, config: dict, out: Path, episode: int) -> None:
     tags = record["tags"][1:]
     console.print(f"wrote {out}: the episode at {record['timesteps']:,} steps, "
                   f"{'success' if record['success'] else 'no success'}, {tags.count('prior')} of {len(tags)} steps on priors")
+
+
+def consistency(
+    run: Path = typer.Argument(..., help="A finished ACER run folder (model.zip, config.yaml)."),
+    rounds: int = typer.Option(3, "--rounds", help="Collect-and-fit rounds."),
+    steps: int = typer.Option(20_000, "--steps", help="Env steps per round (over 4 envs)."),
+    epochs: int = typer.Option(3, "--epochs", help="Passes over the aggregated labels per round."),
+    learning_rate: float = typer.Option(3e-4, "--learning-rate"),
+    episodes: int = typer.Option(100, "--episodes", help="Evaluation episodes each way after the phase (0: none)."),
+    force: bool = typer.Option(False, "--force", help="Replace an earlier phase's RUN/consistent/."),
+) -> None:
+    """Greedy consistency: act greedily, sample only in loops, fit the loop-free paths that reach the goal;
+    the refined model and its evaluation alone (greedy and sampled) go to RUN/consistent/."""
+    with clean_errors():
+        from sb3_disagree.run.consistency import FOLDER, refine_run
+
+        result = refine_run(run, rounds, steps, epochs, learning_rate, episodes, force,
+                            on_round=lambda r: console.print(
+                                f"round: {r.env_steps:,} env steps, {r.successes}/{r.episodes} episodes reached the "
+                                f"goal, {r.labels:,} labels; fit loss {r.loss:.3f}, accuracy {r.accuracy:.2f}"))
+        for label, key in (("greedy", "final_alone_greedy"), ("sampled", "final_alone")):
+            if key in result:
+                console.print(f"{label}: success {result[key]['success_rate']:.2f} over {episodes} episodes "
+                              "(no priors)")
+        console.print(f"wrote {run / FOLDER}: {result['env_steps']:,} env steps in {result['seconds']:.0f} s")

@@ -9,3 +9,4 @@ EVAL_SEED_OFFSET = 10_000  # the periodic evaluations along a run: seed + 10 000
 FINAL_EVAL_SEED_OFFSET = 20_000  # the evaluation after a run (result.json, the model card, dopt eval): seed + 20 000
 PRIOR_CARD_SEED = 10_000  # a prior's evaluation on its card
 PRIOR_VALIDATION_SEED = 20_000  # DAgger's per-round validation of a prior
+CONSISTENCY_SEED_OFFSET = 30_000  # the greedy-consistency phase after a run (dopt consistency): seed + 30 000

@@ -76,3 +76,34 @@ class CueEnv(gym.Env):
             return np.eye(3, dtype=np.float32)[2], 0.0, False, False, {}
         success = int(action) == self.cue
         return np.eye(3, dtype=np.float32)[2], float(success), True, False, {"is_success": success}
+
+
+class TurnEnv(gym.Env):
+    """
+    A line of 5 cells walked with the apartment's actions: 0 turns left, 1 right (a quarter turn), 2 moves one
+    cell along the heading (east or west; facing north or south it is blocked). The east end is the goal
+    (``is_success``); episodes start anywhere else facing anywhere and are cut after 40 steps. Observation:
+    one-hot of (cell, heading). A policy that always turns spins in place: a greedy loop.
+    """
+
+    def __init__(self) -> None:
+        self.observation_space = spaces.Box(0.0, 1.0, (20,), dtype=np.float32)
+        self.action_space = spaces.Discrete(3)
+        self.pos, self.heading, self.t = 0, 0, 0
+
+    def _obs(self) -> np.ndarray:
+        return np.eye(20, dtype=np.float32)[4 * self.pos + self.heading]
+
+    def reset(self, *, seed=None, options=None):
+        super().reset(seed=seed)
+        self.pos, self.heading, self.t = int(self.np_random.integers(4)), int(self.np_random.integers(4)), 0
+        return self._obs(), {}
+
+    def step(self, action):
+        self.t += 1
+        if action == 2:
+            self.pos = int(np.clip(self.pos + {0: 1, 2: -1}.get(self.heading, 0), 0, 4))
+        else:
+            self.heading = (self.heading + (1 if action == 0 else -1)) % 4
+        success = self.pos == 4
+        return self._obs(), float(success), success, self.t >= 40 and not success, {"is_success": success}

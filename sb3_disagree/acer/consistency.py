@@ -1,0 +1,188 @@
+"""
+A greedy-consistency phase for a trained ACER policy (docs/method.md, "Greedy consistency").
+
+ACER's policy stays soft: where two actions are worth about the same to the sampled policy, its argmax is
+arbitrary, and a memoryless argmax then loops (turning left and right between two poses) or stays pressed
+against a wall whose picture looks like open floor. The phase acts greedily, samples only where the newest
+frame was already seen in the episode (the greedy policy is in a loop), cuts every loop out of the episodes
+that reach the goal, and fits the acting network by cross-entropy to the actions of the loop-free paths,
+aggregated over rounds (as DAgger aggregates its labels). No prior, expert or map is used: only the policy, the
+env's success flag and frame identity.
+"""
+
+from dataclasses import dataclass, field
+from typing import Any, Optional
+
+import numpy as np
+import torch as th
+from stable_baselines3.common.preprocessing import maybe_transpose
+from stable_baselines3.common.vec_env import VecEnv
+
+from sb3_disagree.acer.memory import push_frames
+
+
+def loop_free_labels(keys: list[Any], actions: list[int]) -> list[tuple[int, int]]:
+    """
+    The steps of an episode with its loops cut out, each labelled with the action that left its pose for good.
+
+    A step whose key (its newest frame) was seen before closes a loop: the steps since that key's first visit are
+    dropped, and the action now taken from that pose replaces the one taken before. Each kept pose keeps all its
+    visits' inputs (a policy with memory sees a different stack on each), all labelled with its last action.
+
+    :param keys: Per step, a hashable key of the pose (the newest frame's bytes)
+    :param actions: Per step, the action taken
+    :return: (step index, label) pairs, in path order
+    """
+    path: list[tuple[Any, list[int], int]] = []  # (key, the steps at this pose, the action that left it)
+    where: dict[Any, int] = {}
+    for t, (key, action) in enumerate(zip(keys, actions)):
+        if key in where:
+            j = where[key]
+            for dropped, _, _ in path[j + 1:]:
+                del where[dropped]
+            path = path[:j + 1]
+            path[j] = (key, path[j][1] + [t], action)
+        else:
+            where[key] = len(path)
+            path.append((key, [t], action))
+    return [(t, action) for _, steps, action in path for t in steps]
+
+
+@dataclass
+class RoundStats:
+    """What one round collected and fitted."""
+
+    env_steps: int
+    episodes: int
+    successes: int
+    labels: int
+    loss: float
+    accuracy: float
+
+    def as_dict(self) -> dict[str, float]:
+        return {k: float(v) for k, v in self.__dict__.items()}
+
+
+@dataclass
+class _Labels:
+    inputs: list[np.ndarray] = field(default_factory=list)
+    actions: list[int] = field(default_factory=list)
+
+
+def _probs(policy: Any, stacks: np.ndarray) -> np.ndarray:
+    net = policy.acting_net
+    with th.no_grad():
+        features = policy.extract_features(th.as_tensor(stacks, device=policy.device), net.features_extractor)
+        return th.softmax(net.logits(features), dim=-1).cpu().numpy()
+
+
+def collect_escapes(model: Any, env: VecEnv, steps: int, rng: np.random.Generator) -> tuple[_Labels, dict[str, int]]:
+    """
+    Act greedily with the model's acting network, sampling from it only where the newest frame was already seen
+    in the episode, for ``steps`` env steps; return the loop-free labels of the episodes that reached the goal
+    (``info["is_success"]``). Episodes still running at the end are dropped.
+
+    :param model: A trained ACER model
+    :param env: Envs of its task
+    :param steps: Env steps over all envs
+    :param rng: Draws of the sampled actions
+    :return: The labels and counts (env_steps, episodes, successes)
+    """
+    policy, n, k = model.policy, env.num_envs, model.policy.frame_stack
+    obs = np.asarray(maybe_transpose(env.reset(), policy.observation_space))  # images: channels first, as stored
+    stack = push_frames(None, obs, None, k)
+    trails: list[list[tuple[np.ndarray, bytes, int]]] = [[] for _ in range(n)]
+    seen: list[set[bytes]] = [set() for _ in range(n)]
+    labels, episodes, successes = _Labels(), 0, 0
+    for _ in range(max(steps // n, 1)):
+        probs = _probs(policy, stack)
+        actions = probs.argmax(-1)
+        for i in range(n):
+            key = obs[i].tobytes()
+            if key in seen[i]:  # a pose seen before in this episode: the greedy policy loops, so sample
+                actions[i] = rng.choice(len(probs[i]), p=probs[i] / probs[i].sum())
+            seen[i].add(key)
+            trails[i].append((stack[i].copy(), key, int(actions[i])))
+        new_obs, _, dones, infos = env.step(actions)
+        for i in np.flatnonzero(dones):
+            episodes += 1
+            if infos[i].get("is_success"):
+                successes += 1
+                trail = trails[i]
+                for t, action in loop_free_labels([key for _, key, _ in trail], [a for _, _, a in trail]):
+                    labels.inputs.append(trail[t][0])
+                    labels.actions.append(action)
+            trails[i], seen[i] = [], set()
+        obs = np.asarray(maybe_transpose(new_obs, policy.observation_space))
+        stack = push_frames(stack, obs, dones, k)
+    return labels, {"env_steps": max(steps // n, 1) * n, "episodes": episodes, "successes": successes}
+
+
+def fit_labels(policy: Any, inputs: np.ndarray, actions: np.ndarray, epochs: int, learning_rate: float,
+               batch_size: int, rng: np.random.Generator) -> tuple[float, float]:
+    """
+    Fit the policy's acting network (the moving average where one is kept) to ``actions`` by cross-entropy.
+
+    :return: The last epoch's mean loss and accuracy (argmax equal to the label)
+    """
+    net = policy.acting_net
+    net.requires_grad_(True)
+    optimizer = th.optim.Adam(net.parameters(), lr=learning_rate)
+    loss_sum = correct = 0.0
+    try:
+        for _ in range(epochs):
+            loss_sum = correct = 0.0
+            for batch in np.array_split(rng.permutation(len(inputs)), max(len(inputs) // batch_size, 1)):
+                x = th.as_tensor(inputs[batch], device=policy.device)
+                y = th.as_tensor(actions[batch], device=policy.device)
+                logits = net.logits(policy.extract_features(x, net.features_extractor))
+                loss = th.nn.functional.cross_entropy(logits, y)
+                optimizer.zero_grad()
+                loss.backward()
+                optimizer.step()
+                loss_sum += loss.item() * len(batch)
+                correct += (logits.argmax(-1) == y).sum().item()
+    finally:
+        if net is not policy.net:  # the moving average is not trained by gradient elsewhere
+            net.requires_grad_(False)
+    return loss_sum / max(len(inputs), 1), correct / max(len(inputs), 1)
+
+
+def greedy_consistency(model: Any, env: VecEnv, rounds: int = 3, steps: int = 20_000, epochs: int = 3,
+                       learning_rate: float = 3e-4, batch_size: int = 128, seed: int = 0,
+                       on_round: Optional[Any] = None) -> list[RoundStats]:
+    """
+    The greedy-consistency phase: ``rounds`` times, collect ``steps`` env steps acting greedily (sampling only
+    in loops), add the loop-free labels of the successful episodes to those of earlier rounds, and fit the acting
+    network to all of them. The model is changed in place; ``rounds * steps`` env steps are spent.
+
+    :param model: A trained ACER model
+    :param env: Envs of its task (seeded apart from its training and evaluation envs)
+    :param rounds: Collect-and-fit rounds
+    :param steps: Env steps per round, over all envs
+    :param epochs: Passes over the aggregated labels per round
+    :param learning_rate: Adam's step size
+    :param batch_size: Labels per gradient step
+    :param seed: Seed of the sampled actions and the minibatches
+    :param on_round: Called with each round's :class:`RoundStats`
+    :return: Each round's statistics
+    """
+    if rounds < 1 or steps < env.num_envs or epochs < 1:
+        raise ValueError(f"rounds and epochs must be >= 1 and steps >= the number of envs, got {rounds}, {steps}, "
+                         f"{epochs}")
+    rng = np.random.default_rng(seed)
+    inputs: list[np.ndarray] = []
+    actions: list[int] = []
+    history = []
+    for _ in range(rounds):
+        labels, counts = collect_escapes(model, env, steps, rng)
+        inputs += labels.inputs
+        actions += labels.actions
+        loss, accuracy = (fit_labels(model.policy, np.stack(inputs), np.asarray(actions, dtype=np.int64), epochs,
+                                     learning_rate, batch_size, rng) if inputs else (float("nan"), float("nan")))
+        stats = RoundStats(counts["env_steps"], counts["episodes"], counts["successes"], len(labels.actions), loss,
+                           accuracy)
+        history.append(stats)
+        if on_round is not None:
+            on_round(stats)
+    return history

@@ -1,0 +1,74 @@
+"""The greedy-consistency phase on a finished run: its model refined, evaluated both ways, written beside it."""
+
+import json
+import shutil
+import time
+from pathlib import Path
+from typing import Any, Callable, Optional
+
+import yaml
+
+from sb3_disagree.acer import ACER
+from sb3_disagree.acer.consistency import RoundStats, greedy_consistency
+from sb3_disagree.defaults import CONSISTENCY_SEED_OFFSET
+from sb3_disagree.envs.vec import make_vec
+from sb3_disagree.files import write_atomic
+from sb3_disagree.run.evaluation import evaluate_both
+
+FOLDER = "consistent"  # inside the run: model.zip and result.json of the refined policy
+
+
+def refine_run(run_dir: Path, rounds: int = 3, steps: int = 20_000, epochs: int = 3, learning_rate: float = 3e-4,
+               episodes: int = 100, force: bool = False,
+               on_round: Optional[Callable[[RoundStats], None]] = None) -> dict[str, Any]:
+    """
+    Run the greedy-consistency phase (:func:`~sb3_disagree.acer.consistency.greedy_consistency`) on a finished
+    ACER run's ``model.zip``, on env seeds of its own (the run's seed + ``CONSISTENCY_SEED_OFFSET``), and write the
+    refined model and its evaluation alone (greedy and sampled, from the run's final-evaluation env seeds, as
+    ``result.json`` and ``dopt eval``) to ``run_dir/consistent/``. The run's own files are not touched.
+
+    :param run_dir: A run folder (``model.zip`` and ``config.yaml``)
+    :param rounds: Collect-and-fit rounds
+    :param steps: Env steps per round
+    :param epochs: Passes over the labels per round
+    :param learning_rate: Adam's step size
+    :param episodes: Evaluation episodes each way (greedy, sampled) after the phase; 0: none
+    :param force: Replace an earlier phase's folder
+    :param on_round: Called with each round's statistics
+    :return: The result written to ``consistent/result.json``
+    """
+    run_dir = Path(run_dir)
+    model_path, config_path, out = run_dir / "model.zip", run_dir / "config.yaml", run_dir / FOLDER
+    for path in (model_path, config_path):
+        if not path.exists():
+            raise FileNotFoundError(f"{path} is missing: not a finished run")
+    if out.exists() and not force:
+        raise ValueError(f"{out} holds an earlier phase's model: replace it with --force")
+    if rounds < 1 or epochs < 1 or steps < 4 or learning_rate <= 0 or episodes < 0:
+        raise ValueError(f"--rounds and --epochs must be >= 1, --steps >= 4 (one per env), --learning-rate > 0 and "
+                         f"--episodes >= 0, got {rounds}, {epochs}, {steps}, {learning_rate} and {episodes}")
+    config = yaml.safe_load(config_path.read_text())
+    if config.get("mode") == "ppo":
+        raise ValueError("the greedy-consistency phase refines an ACER policy; this run trained PPO")
+    model = ACER.load(model_path, device="cpu")
+    env = make_vec(config["env_id"], config["goal"], config.get("env_kwargs") or {}, n_envs=4,
+                   seed=config.get("seed", 0) + CONSISTENCY_SEED_OFFSET)
+    start = time.perf_counter()
+    try:
+        history = greedy_consistency(model, env, rounds, steps, epochs, learning_rate, seed=config.get("seed", 0),
+                                     on_round=on_round)
+    finally:
+        env.close()
+    seconds = time.perf_counter() - start
+    if out.exists():
+        shutil.rmtree(out)
+    out.mkdir()
+    model.save(out / "model.zip")
+    (out / "config.yaml").write_text(config_path.read_text())  # dopt eval reads the env and goal beside the model
+    evaluations = evaluate_both(model, config, episodes) if episodes > 0 else {}
+    result = {"rounds": rounds, "steps_per_round": steps, "epochs": epochs, "learning_rate": learning_rate,
+              "env_steps": sum(r.env_steps for r in history), "seconds": round(seconds, 1),
+              "per_round": [r.as_dict() for r in history],
+              **{f"final_alone{'_greedy' if label == 'greedy' else ''}": e.as_dict() for label, e in evaluations.items()}}
+    write_atomic(out / "result.json", json.dumps(result, indent=2) + "\n")
+    return result

@@ -1,0 +1,99 @@
+"""The greedy-consistency phase: loops cut by hand, a looping greedy policy made to reach the goal, dopt consistency."""
+
+import json
+
+import numpy as np
+import pytest
+import torch as th
+import yaml
+from envs import TurnEnv
+from stable_baselines3.common.env_util import make_vec_env
+from stable_baselines3.common.evaluation import evaluate_policy
+from typer.testing import CliRunner
+
+from sb3_disagree import ACER
+from sb3_disagree.acer.consistency import collect_escapes, greedy_consistency, loop_free_labels
+from sb3_disagree.cli.app import app
+
+runner = CliRunner()
+
+
+@pytest.mark.parametrize("keys, actions, expected", [
+    ("ABCD", [2, 2, 2, 2], [(0, 2), (1, 2), (2, 2), (3, 2)]),  # no loop: every step as taken
+    ("ABAC", [1, 0, 2, 2], [(0, 2), (2, 2), (3, 2)]),  # A -> B -> A: B dropped, A labelled by what left it
+    ("AAB", [2, 0, 2], [(0, 0), (1, 0), (2, 2)]),  # a blocked forward (the frame unchanged) relabelled
+    ("ABCBAD", [1, 1, 0, 0, 2, 2], [(0, 2), (4, 2), (5, 2)]),  # a loop inside a loop: both cut
+    ("ABCB", [0, 1, 2, 0], [(0, 0), (1, 0), (3, 0)]),  # the last action from B replaces the first
+])
+def test_loop_free_labels_by_hand(keys, actions, expected):
+    assert loop_free_labels(list(keys), actions) == expected
+
+
+def _spinning_model(frame_stack: int = 1) -> ACER:
+    """A policy whose argmax everywhere is turn left (a loop), its samples turning or moving."""
+    env = make_vec_env(TurnEnv, n_envs=4, seed=0)
+    model = ACER("MlpPolicy", env, seed=0, policy_kwargs=dict(net_arch=[32], frame_stack=frame_stack))
+    with th.no_grad():
+        head = model.policy.net.action_net
+        head.weight.zero_()
+        head.bias.copy_(th.tensor([1.0, 0.0, 0.0]))
+    return model
+
+
+def _greedy_success(model: ACER, seed: int = 100) -> float:
+    env = make_vec_env(TurnEnv, n_envs=4, seed=seed)
+    successes = []
+    evaluate_policy(model, env, n_eval_episodes=40, deterministic=True,
+                    callback=lambda local, _: successes.append(local["info"]["is_success"]) if local["done"] else None)
+    return float(np.mean(successes))
+
+
+def test_collect_escapes_labels_only_successful_loop_free_paths():
+    model = _spinning_model()
+    labels, counts = collect_escapes(model, make_vec_env(TurnEnv, n_envs=4, seed=1), 800, np.random.default_rng(0))
+    assert counts["env_steps"] == 800 and 0 < counts["successes"] <= counts["episodes"]
+    inputs = np.stack(labels.inputs)
+    assert inputs.shape[1:] == (20,) and len(inputs) == len(labels.actions)
+    # Greedy is turn left; a loop-free path that reaches the east end must also move, and never at a wall.
+    actions = np.asarray(labels.actions)
+    assert (actions == 2).any()
+    heading = inputs.argmax(1) % 4
+    assert not ((actions == 2) & np.isin(heading, [1, 3])).any()
+
+
+@pytest.mark.parametrize("frame_stack", [1, 2])
+def test_phase_turns_a_looping_greedy_policy_into_one_that_reaches_the_goal(frame_stack):
+    model = _spinning_model(frame_stack)
+    assert _greedy_success(model) == 0.0  # spins in place
+    history = greedy_consistency(model, make_vec_env(TurnEnv, n_envs=4, seed=1), rounds=3, steps=2000, epochs=20,
+                                 learning_rate=3e-3, seed=0)
+    assert [r.env_steps for r in history] == [2000] * 3 and all(r.labels > 0 for r in history)
+    assert _greedy_success(model) >= 0.95
+
+
+def test_phase_refuses_bad_settings():
+    with pytest.raises(ValueError, match="rounds and epochs"):
+        greedy_consistency(_spinning_model(), make_vec_env(TurnEnv, n_envs=4), rounds=0)
+
+
+def test_dopt_consistency_writes_beside_the_run_and_never_over_it(tmp_path):
+    run = tmp_path / "run"
+    result = runner.invoke(app, ["train", "--goal", "bathtub", "--env", "sb3_disagree/ApartmentState-v0", "--mode",
+                                 "scratch", "--steps", "200", "--n-envs", "2", "--out", str(tmp_path / "runs")])
+    assert result.exit_code == 0, result.output
+    (run_dir,) = (tmp_path / "runs").glob("*/bathtub/scratch-0")
+    before = (run_dir / "model.zip").read_bytes()
+    args = ["consistency", str(run_dir), "--rounds", "1", "--steps", "200", "--epochs", "1", "--episodes", "2"]
+    result = runner.invoke(app, args)
+    assert result.exit_code == 0, result.output
+    out = json.loads((run_dir / "consistent" / "result.json").read_text())
+    assert out["env_steps"] == 200 and out["final_alone_greedy"]["episodes"] == 2 and out["final_alone"]["episodes"] == 2
+    assert yaml.safe_load((run_dir / "consistent" / "config.yaml").read_text())["goal"] == "bathtub"
+    assert (run_dir / "model.zip").read_bytes() == before  # the run's own model untouched
+    ACER.load(run_dir / "consistent" / "model.zip")
+    again = runner.invoke(app, args)
+    assert again.exit_code == 2 and "--force" in again.output
+    assert runner.invoke(app, [*args, "--force"]).exit_code == 0
+    bad = runner.invoke(app, ["consistency", str(run_dir), "--rounds", "0", "--force"])
+    assert bad.exit_code == 2 and "--rounds" in bad.output and "Traceback" not in bad.output
+    assert runner.invoke(app, ["consistency", str(tmp_path / "nothing")]).exit_code == 2
