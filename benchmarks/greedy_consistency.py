@@ -5,7 +5,7 @@ before (the run's result.json) and after, greedy and sampled, 100 episodes each 
 env seeds (docs/results.md, "Greedy consistency").
 
     python benchmarks/greedy_consistency.py benchmarks/results/experiments/alone-bathtub/kickstart-rs1-ema-overlap \
-        --seeds 0,1,2,3,4 [--rounds 3] [--steps 20000] [--force]
+        --seeds 0,1,2,3,4 [--rounds 3] [--steps 20000] [--name consistent] [--force]
 """
 
 import argparse
@@ -23,15 +23,17 @@ def main() -> None:
     parser.add_argument("--seeds", default="0,1,2,3,4")
     parser.add_argument("--rounds", type=int, default=3)
     parser.add_argument("--steps", type=int, default=20_000)
+    parser.add_argument("--epochs", type=int, default=3)
+    parser.add_argument("--name", default=FOLDER, help="the folder inside each run (one per setting)")
     parser.add_argument("--force", action="store_true", help="redo seeds already refined")
     args = parser.parse_args()
     th.set_num_threads(1)  # one thread per process, two processes on two cores
     rows = []
     for seed in [int(s) for s in args.seeds.split(",")]:
         run = args.cell / f"seed-{seed}"
-        done = run / FOLDER / "result.json"
+        done = run / args.name / "result.json"
         if args.force or not done.exists():
-            refine_run(run, rounds=args.rounds, steps=args.steps, force=args.force,
+            refine_run(run, rounds=args.rounds, steps=args.steps, epochs=args.epochs, force=args.force, name=args.name,
                        on_round=lambda r, s=seed: print(f"seed {s}: {r}", flush=True))
         before, after = json.loads((run / "result.json").read_text()), json.loads(done.read_text())
         rows.append((seed, before["final_alone_greedy"]["success_rate"], before["final_alone"]["success_rate"],

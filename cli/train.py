@@ -204,14 +204,15 @@ def consistency(
     epochs: int = typer.Option(3, "--epochs", help="Passes over the aggregated labels per round."),
     learning_rate: float = typer.Option(3e-4, "--learning-rate"),
     episodes: int = typer.Option(100, "--episodes", help="Evaluation episodes each way after the phase (0: none)."),
-    force: bool = typer.Option(False, "--force", help="Replace an earlier phase's RUN/consistent/."),
+    force: bool = typer.Option(False, "--force", help="Replace an earlier phase's folder."),
+    name: str = typer.Option("consistent", "--name", help="The folder inside RUN the refined model goes to."),
 ) -> None:
     """Greedy consistency: act greedily, sample only in loops, fit the loop-free paths that reach the goal;
-    the refined model and its evaluation alone (greedy and sampled) go to RUN/consistent/."""
+    the refined model and its evaluation alone (greedy and sampled) go to RUN/consistent/ (--name)."""
     with clean_errors():
-        from sb3_disagree.run.consistency import FOLDER, refine_run
+        from sb3_disagree.run.consistency import refine_run
 
-        result = refine_run(run, rounds, steps, epochs, learning_rate, episodes, force,
+        result = refine_run(run, rounds, steps, epochs, learning_rate, episodes, force, name,
                             on_round=lambda r: console.print(
                                 f"round: {r.env_steps:,} env steps, {r.successes}/{r.episodes} episodes reached the "
                                 f"goal, {r.labels:,} labels; fit loss {r.loss:.3f}, accuracy {r.accuracy:.2f}"))
@@ -219,4 +220,4 @@ def consistency(
             if key in result:
                 console.print(f"{label}: success {result[key]['success_rate']:.2f} over {episodes} episodes "
                               "(no priors)")
-        console.print(f"wrote {run / FOLDER}: {result['env_steps']:,} env steps in {result['seconds']:.0f} s")
+        console.print(f"wrote {run / name}: {result['env_steps']:,} env steps in {result['seconds']:.0f} s")

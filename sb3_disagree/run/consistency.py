@@ -1,4 +1,4 @@
-"""The greedy-consistency phase on a finished run: its model refined, evaluated both ways, written beside it."""
+"""The greedy-consistency phase on a finished run: its model refined, evaluated both ways, written inside its folder."""
 
 import json
 import shutil
@@ -19,13 +19,13 @@ FOLDER = "consistent"  # inside the run: model.zip and result.json of the refine
 
 
 def refine_run(run_dir: Path, rounds: int = 3, steps: int = 20_000, epochs: int = 3, learning_rate: float = 3e-4,
-               episodes: int = 100, force: bool = False,
+               episodes: int = 100, force: bool = False, name: str = FOLDER,
                on_round: Optional[Callable[[RoundStats], None]] = None) -> dict[str, Any]:
     """
     Run the greedy-consistency phase (:func:`~sb3_disagree.acer.consistency.greedy_consistency`) on a finished
     ACER run's ``model.zip``, on env seeds of its own (the run's seed + ``CONSISTENCY_SEED_OFFSET``), and write the
     refined model and its evaluation alone (greedy and sampled, from the run's final-evaluation env seeds, as
-    ``result.json`` and ``dopt eval``) to ``run_dir/consistent/``. The run's own files are not touched.
+    ``result.json`` and ``dopt eval``) to ``run_dir/<name>/`` (``consistent`` by default). The run's own files are not touched.
 
     :param run_dir: A run folder (``model.zip`` and ``config.yaml``)
     :param rounds: Collect-and-fit rounds
@@ -34,11 +34,14 @@ def refine_run(run_dir: Path, rounds: int = 3, steps: int = 20_000, epochs: int 
     :param learning_rate: Adam's step size
     :param episodes: Evaluation episodes each way (greedy, sampled) after the phase; 0: none
     :param force: Replace an earlier phase's folder
+    :param name: The folder inside the run that the refined model goes to
     :param on_round: Called with each round's statistics
     :return: The result written to ``consistent/result.json``
     """
     run_dir = Path(run_dir)
-    model_path, config_path, out = run_dir / "model.zip", run_dir / "config.yaml", run_dir / FOLDER
+    model_path, config_path, out = run_dir / "model.zip", run_dir / "config.yaml", run_dir / name
+    if not name or Path(name).name != name or name in (".", ".."):
+        raise ValueError(f"--name must be a plain folder name, got {name!r}")
     for path in (model_path, config_path):
         if not path.exists():
             raise FileNotFoundError(f"{path} is missing: not a finished run")
