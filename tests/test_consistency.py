@@ -99,3 +99,18 @@ def test_dopt_consistency_writes_beside_the_run_and_never_over_it(tmp_path):
     assert runner.invoke(app, ["consistency", str(tmp_path / "nothing")]).exit_code == 2
     assert runner.invoke(app, [*args, "--name", "../elsewhere"]).exit_code == 2 and not (tmp_path / "elsewhere").exists()
     assert runner.invoke(app, [*args, "--name", "short"]).exit_code == 0 and (run_dir / "short" / "model.zip").exists()
+
+
+def test_dopt_train_runs_the_phase_after_training_when_asked(tmp_path):
+    base = ["train", "--goal", "bathtub", "--env", "sb3_disagree/ApartmentState-v0", "--mode", "scratch", "--steps",
+            "200", "--n-envs", "2", "--card-episodes", "2", "--out", str(tmp_path)]
+    bad = runner.invoke(app, [*base, "--consistency-rounds", "-1"])
+    assert bad.exit_code == 2 and "--consistency-rounds" in bad.output and not list(tmp_path.iterdir())
+    ppo = runner.invoke(app, [*base, "--mode", "ppo", "--consistency-rounds", "1"])
+    assert ppo.exit_code == 2 and not list(tmp_path.iterdir())
+    result = runner.invoke(app, [*base, "--consistency-rounds", "1"])
+    assert result.exit_code == 0, result.output
+    (run_dir,) = tmp_path.glob("*/bathtub/scratch-0")
+    out = json.loads((run_dir / "consistent" / "result.json").read_text())
+    assert out["rounds"] == 1 and out["env_steps"] == 20_000 and out["final_alone_greedy"]["episodes"] == 2
+    assert "the refined policy alone, greedy" in result.output
