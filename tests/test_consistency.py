@@ -97,6 +97,12 @@ def test_dopt_consistency_writes_beside_the_run_and_never_over_it(tmp_path):
     bad = runner.invoke(app, ["consistency", str(run_dir), "--rounds", "0", "--force"])
     assert bad.exit_code == 2 and "--rounds" in bad.output and "Traceback" not in bad.output
     assert runner.invoke(app, ["consistency", str(tmp_path / "nothing")]).exit_code == 2
+    damaged = tmp_path / "damaged"
+    damaged.mkdir()
+    (damaged / "model.zip").write_bytes(b"not a zip")
+    (damaged / "config.yaml").write_text((run_dir / "config.yaml").read_text())
+    result = runner.invoke(app, ["consistency", str(damaged)])
+    assert result.exit_code == 2 and "could not be loaded" in result.output and not (damaged / "consistent").exists()
     assert runner.invoke(app, [*args, "--name", "../elsewhere"]).exit_code == 2 and not (tmp_path / "elsewhere").exists()
     assert runner.invoke(app, [*args, "--name", "short"]).exit_code == 0 and (run_dir / "short" / "model.zip").exists()
 

@@ -53,7 +53,10 @@ def refine_run(run_dir: Path, rounds: int = 3, steps: int = 20_000, epochs: int 
     config = yaml.safe_load(config_path.read_text())
     if config.get("mode") == "ppo":
         raise ValueError("the greedy-consistency phase refines an ACER policy; this run trained PPO")
-    model = ACER.load(model_path, device="cpu")
+    try:
+        model = ACER.load(model_path, device="cpu")
+    except Exception as exc:  # a damaged file, or another algorithm's
+        raise ValueError(f"{model_path} could not be loaded as ACER: {exc}") from None
     env = make_vec(config["env_id"], config["goal"], config.get("env_kwargs") or {}, n_envs=4,
                    seed=config.get("seed", 0) + CONSISTENCY_SEED_OFFSET)
     start = time.perf_counter()
