@@ -69,13 +69,6 @@ class _Labels:
     actions: list[int] = field(default_factory=list)
 
 
-def _probs(policy: Any, stacks: np.ndarray) -> np.ndarray:
-    net = policy.acting_net
-    with th.no_grad():
-        features = policy.extract_features(th.as_tensor(stacks, device=policy.device), net.features_extractor)
-        return th.softmax(net.logits(features), dim=-1).cpu().numpy()
-
-
 def collect_escapes(model: Any, env: VecEnv, steps: int, rng: np.random.Generator) -> tuple[_Labels, dict[str, int]]:
     """
     Act greedily with the model's acting network, sampling from it only where the newest frame was already seen
@@ -95,7 +88,8 @@ def collect_escapes(model: Any, env: VecEnv, steps: int, rng: np.random.Generato
     seen: list[set[bytes]] = [set() for _ in range(n)]
     labels, episodes, successes = _Labels(), 0, 0
     for _ in range(max(steps // n, 1)):
-        probs = _probs(policy, stack)
+        with th.no_grad():  # the acting network's distribution, as predict draws from it
+            probs = policy.get_distribution(th.as_tensor(stack, device=policy.device)).distribution.probs.cpu().numpy()
         actions = probs.argmax(-1)
         for i in range(n):
             key = obs[i].tobytes()

@@ -6,14 +6,12 @@ import time
 from pathlib import Path
 from typing import Any, Callable, Optional
 
-import yaml
-
 from sb3_disagree.acer import ACER
 from sb3_disagree.acer.consistency import RoundStats, greedy_consistency
 from sb3_disagree.defaults import CONSISTENCY_SEED_OFFSET
 from sb3_disagree.envs.vec import make_vec
 from sb3_disagree.files import write_atomic
-from sb3_disagree.run.evaluation import evaluate_both
+from sb3_disagree.run.evaluation import evaluate_both, load_run
 
 FOLDER = "consistent"  # inside the run: model.zip and result.json of the refined policy
 
@@ -39,24 +37,17 @@ def refine_run(run_dir: Path, rounds: int = 3, steps: int = 20_000, epochs: int 
     :return: The result written to ``consistent/result.json``
     """
     run_dir = Path(run_dir)
-    model_path, config_path, out = run_dir / "model.zip", run_dir / "config.yaml", run_dir / name
+    out = run_dir / name
     if not name or Path(name).name != name or name in (".", ".."):
         raise ValueError(f"--name must be a plain folder name, got {name!r}")
-    for path in (model_path, config_path):
-        if not path.exists():
-            raise FileNotFoundError(f"{path} is missing: not a finished run")
     if out.exists() and not force:
         raise ValueError(f"{out} holds an earlier phase's model: replace it with --force")
     if rounds < 1 or epochs < 1 or steps < 4 or learning_rate <= 0 or episodes < 0:
         raise ValueError(f"--rounds and --epochs must be >= 1, --steps >= 4 (one per env), --learning-rate > 0 and "
                          f"--episodes >= 0, got {rounds}, {epochs}, {steps}, {learning_rate} and {episodes}")
-    config = yaml.safe_load(config_path.read_text())
-    if config.get("mode") == "ppo":
+    config, model = load_run(run_dir)
+    if not isinstance(model, ACER):
         raise ValueError("the greedy-consistency phase refines an ACER policy; this run trained PPO")
-    try:
-        model = ACER.load(model_path, device="cpu")
-    except Exception as exc:  # a damaged file, or another algorithm's
-        raise ValueError(f"{model_path} could not be loaded as ACER: {exc}") from None
     env = make_vec(config["env_id"], config["goal"], config.get("env_kwargs") or {}, n_envs=4,
                    seed=config.get("seed", 0) + CONSISTENCY_SEED_OFFSET)
     start = time.perf_counter()
@@ -70,7 +61,7 @@ def refine_run(run_dir: Path, rounds: int = 3, steps: int = 20_000, epochs: int 
         shutil.rmtree(out)
     out.mkdir()
     model.save(out / "model.zip")
-    (out / "config.yaml").write_text(config_path.read_text())  # dopt eval reads the env and goal beside the model
+    (out / "config.yaml").write_text((run_dir / "config.yaml").read_text())  # dopt eval reads the env and goal beside the model
     evaluations = evaluate_both(model, config, episodes) if episodes > 0 else {}
     result = {"rounds": rounds, "steps_per_round": steps, "epochs": epochs, "learning_rate": learning_rate,
               "env_steps": sum(r.env_steps for r in history), "seconds": round(seconds, 1),

@@ -139,6 +139,17 @@ def evaluate_run(path: Path, episodes: int = 100, seed: Optional[int] = None,
     :param labels: "greedy" and/or "sampled"
     :return: The run's configuration and the :class:`~sb3_disagree.evaluation.Evaluation` by label
     """
+    config, model = load_run(path)
+    return config, evaluate_both(model, config, episodes, seed, tuple(labels))
+
+
+def load_run(path: Path) -> tuple[dict[str, Any], Any]:
+    """
+    A trained run's configuration and model, as a user would load it.
+
+    :param path: A run folder, or a ``model.zip`` with the run's ``config.yaml`` beside it
+    :return: The configuration (``config.yaml``) and the model, loaded on the CPU with its algorithm's ``load``
+    """
     path = Path(path)
     run_dir = path if path.is_dir() else path.parent
     model_path = path / "model.zip" if path.is_dir() else path
@@ -150,7 +161,6 @@ def evaluate_run(path: Path, episodes: int = 100, seed: Optional[int] = None,
     config = yaml.safe_load(cfg_path.read_text())
     algorithm = algorithm_of(config.get("mode", "disagreement"))
     try:
-        model = algorithm.load(model_path, device="cpu")
+        return config, algorithm.load(model_path, device="cpu")
     except Exception as exc:  # a damaged file, or another algorithm's
         raise ValueError(f"{model_path} could not be loaded as {algorithm.__name__}: {exc}") from None
-    return config, evaluate_both(model, config, episodes, seed, tuple(labels))
