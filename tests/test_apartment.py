@@ -186,3 +186,18 @@ def test_expert_reaches_every_object_from_50_corridor_starts(goal):
                 break
         assert info["is_success"], f"expert failed to reach {goal} from seed {1000 + seed}"
         assert env.step_count <= 500
+
+
+def test_textures_decoded_as_pyglet_decodes_them():
+    # The renderer decodes textures with Pillow (fast); the texels GL keeps (RGB, rows bottom up) must be pyglet's.
+    from sb3_disagree.envs.render import texture_image  # first: it arranges pyglet's headless mode
+
+    import pyglet
+    from miniworld.utils import get_file_path
+
+    path = get_file_path("textures", "stucco_1", "png")
+    ours = np.frombuffer(texture_image(path).get_data("RGBA", 512 * 4), np.uint8).reshape(512, 512, 4)
+    image = pyglet.image.load(path)
+    theirs = np.frombuffer(image.get_image_data().get_data("RGBA", 512 * 4), np.uint8).reshape(512, 512, 4)
+    assert image.width == image.height == 512 and ours[..., 3].min() == 255
+    assert np.array_equal(ours[..., :3], theirs[..., :3]) and not np.array_equal(ours[::-1, ..., :3], ours[..., :3])

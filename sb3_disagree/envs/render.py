@@ -12,13 +12,47 @@ import numpy as np
 from sb3_disagree.envs.headless import arrange_headless
 
 arrange_headless()
+import pyglet  # noqa: E402
 from miniworld.entity import COLORS, Box  # noqa: E402
 from miniworld.miniworld import MiniWorldEnv  # noqa: E402
+from miniworld.opengl import Texture  # noqa: E402
+from PIL import Image  # noqa: E402
+from pyglet import gl  # noqa: E402
 
 from sb3_disagree.envs.layout import EXTRA_COLORS, Layout  # noqa: E402
 
 for _name, _rgb in EXTRA_COLORS.items():
     COLORS.setdefault(_name, np.array(_rgb))
+
+
+def texture_image(tex_path: str) -> "pyglet.image.ImageData":
+    """
+    A texture file as pyglet RGBA image data, rows bottom up as GL reads them, decoded by Pillow: pyglet's own
+    RGB to RGBA conversion runs in Python and cost ~4 s of each process's first scene (1.3 s for a 1024x1024
+    texture). Its RGB is the same; its alpha differs (pyglet's fills alpha with red), which MiniWorld's GL_RGB
+    textures drop.
+    """
+    rgba = Image.open(tex_path).convert("RGBA").transpose(Image.Transpose.FLIP_TOP_BOTTOM)
+    return pyglet.image.ImageData(rgba.width, rgba.height, "RGBA", rgba.tobytes(), pitch=rgba.width * 4)
+
+
+def _load_texture(cls: type, tex_path: str) -> "pyglet.image.Texture":
+    """MiniWorld's ``Texture.load``, the same GL calls on :func:`texture_image`'s data."""
+    img = texture_image(tex_path)
+    tex = img.get_texture()
+    gl.glEnable(tex.target)
+    gl.glBindTexture(tex.target, tex.id)
+    gl.glTexImage2D(gl.GL_TEXTURE_2D, 0, gl.GL_RGB, img.width, img.height, 0, gl.GL_RGBA, gl.GL_UNSIGNED_BYTE,
+                    img.get_data("RGBA", img.width * 4))
+    gl.glHint(gl.GL_GENERATE_MIPMAP_HINT, gl.GL_NICEST)
+    gl.glGenerateMipmap(gl.GL_TEXTURE_2D)
+    gl.glTexParameteri(gl.GL_TEXTURE_2D, gl.GL_TEXTURE_MAG_FILTER, gl.GL_LINEAR)
+    gl.glTexParameteri(gl.GL_TEXTURE_2D, gl.GL_TEXTURE_MIN_FILTER, gl.GL_LINEAR_MIPMAP_LINEAR)
+    gl.glBindTexture(gl.GL_TEXTURE_2D, 0)
+    return tex
+
+
+Texture.load = classmethod(_load_texture)
 
 
 class StaticBox(Box):
