@@ -5,7 +5,7 @@ before (the run's result.json) and after, greedy and sampled, 100 episodes each 
 env seeds (docs/results.md, "Greedy consistency").
 
     python benchmarks/greedy_consistency.py benchmarks/results/experiments/alone-bathtub/kickstart-rs1-ema-overlap \
-        --seeds 0,1,2,3,4 [--rounds 3] [--steps 20000] [--name consistent] [--force]
+        --seeds 0,1,2,3,4 [--rounds 3] [--steps 20000] [--name consistent] [--force] [--threads 1]
 """
 
 import argparse
@@ -26,8 +26,9 @@ def main() -> None:
     parser.add_argument("--epochs", type=int, default=3)
     parser.add_argument("--name", default=FOLDER, help="the folder inside each run (one per setting)")
     parser.add_argument("--force", action="store_true", help="redo seeds already refined")
+    parser.add_argument("--threads", type=int, default=1, help="torch threads (1: two such processes on two cores)")
     args = parser.parse_args()
-    th.set_num_threads(1)  # one thread per process, two processes on two cores
+    th.set_num_threads(args.threads)
     rows = []
     for seed in [int(s) for s in args.seeds.split(",")]:
         run = args.cell / f"seed-{seed}"

@@ -62,7 +62,7 @@ def _run_options() -> list:
 
 def _cli_only(card_episodes: int = 20, progress_every: float = 30.0, reward_scale: Optional[float] = None,
               ema_decay: Optional[float] = None, collision_penalty: Optional[float] = None,
-              reward_distance: Optional[str] = None, consistency_rounds: int = 0) -> None:
+              reward_distance: Optional[str] = None) -> None:
     """
     :param reward_scale: Rewards in ACER's updates are multiplied by this (default: the mode's; 1.0 for
         kickstarting, 0.1 for the others). At 1.0 kickstarting's policy is sharper, its argmax a real choice
@@ -75,8 +75,6 @@ def _cli_only(card_episodes: int = 20, progress_every: float = 30.0, reward_scal
     :param reward_distance: What the env's reward distance follows: "euclidean" (the apartment's default, the
         paper's straight line) or "geodesic" (the shortest free path; the office scans always use it); what counts
         as success is unchanged
-    :param consistency_rounds: After training, this many rounds (20k env steps each) of the greedy-consistency
-        phase (dopt consistency, docs/method.md); the refined model goes to RUN/consistent/ (0: none)
     :param card_episodes: Episodes each way (greedy, sampled) of the evaluation on the model card written beside
         model.zip (0: none)
     :param progress_every: Seconds between progress lines when the output is not a terminal
@@ -90,11 +88,8 @@ def train(**options) -> None:
     with clean_errors():
         from sb3_disagree.run import RunConfig, check_resume, train as run, write_card
 
-        out, resume, force, card_episodes, every, rounds = (
-            options.pop(k) for k in ("out", "resume", "force", "card_episodes", "progress_every", "consistency_rounds"))
-        if rounds < 0 or (rounds and options["mode"] == "ppo"):
-            raise ValueError(f"--consistency-rounds must be >= 0 and refines an ACER policy (not --mode ppo), got "
-                             f"{rounds} with --mode {options['mode']}")
+        out, resume, force, card_episodes, every = (
+            options.pop(k) for k in ("out", "resume", "force", "card_episodes", "progress_every"))
         options["acer_kwargs"] = {k: v for k in ("reward_scale", "ema_decay") if (v := options.pop(k)) is not None}
         options["env_kwargs"] = {k: v for k in ("collision_penalty", "reward_distance") if (v := options.pop(k)) is not None}
         steps = options["steps"]
@@ -103,13 +98,17 @@ def train(**options) -> None:
         display = _Display(every)
         with display as callback:
             run_dir, model, finished = run(config, out, resume=resume, callbacks=[callback], force=force,
-                                           on_priors=_show_priors, steps=steps if resume is not None else None)
+                                           on_priors=_show_priors, steps=steps if resume is not None else None,
+                                           on_round=_show_round)
         if card_episodes and finished:
             console.print(f"evaluating the new policy alone for its card ({card_episodes} episodes each way)")
         _show_evaluations(write_card(run_dir, model, card_episodes if finished else 0, command_line()))
         _show_end(run_dir, model, finished, config.goal)
-        if rounds:
-            _consistency(run_dir, rounds=rounds, episodes=card_episodes, force=force, name="consistent")
+
+
+def _show_round(r) -> None:
+    console.print(f"greedy consistency, a round: {r.env_steps:,} env steps, {r.successes}/{r.episodes} episodes "
+                  f"reached the goal, {r.labels:,} labels; fit loss {r.loss:.3f}, accuracy {r.accuracy:.2f}")
 
 
 def _priors(text: str):
@@ -157,9 +156,19 @@ def _show_end(run_dir: Path, model, finished: bool, goal: str) -> None:
         evals = np.load(run_dir / "evaluations.npz")
         console.print("the new policy alone (success): " + ", ".join(
             f"{t:,} steps {np.mean(s):.2f}" for t, s in zip(evals["timesteps"], evals["successes"])))
+    import yaml
+
+    saved = yaml.safe_load((run_dir / "config.yaml").read_text()) or {}
     if finished:
-        console.print(f"done: {model.num_timesteps:,} steps; wrote {run_dir}")
+        phase = saved.get("consistency")
+        console.print(f"done: {model.num_timesteps:,} steps" + (
+            f" of training and {int(phase['env_steps']):,} of the greedy-consistency phase (model.zip is its policy)"
+            if phase else "") + f"; wrote {run_dir}")
         return
+    if saved.get("finished"):
+        console.print(f"[yellow]interrupted[/] in the greedy-consistency phase; {run_dir}/model.zip is the trained "
+                      f"policy; redo the phase with: dopt train --goal {goal} --resume {run_dir}")
+        raise typer.Exit(code=130)
     console.print(f"[yellow]interrupted[/] at {model.num_timesteps:,} steps; saved the model and replay buffer "
                   f"in {run_dir}; continue with: dopt train --goal {goal} --resume {run_dir}")
     raise typer.Exit(code=130)
@@ -225,10 +234,7 @@ def _consistency(run: Path, rounds: int = 3, steps: int = 20_000, epochs: int = 
     from sb3_disagree.run.consistency import refine_run
 
     console.print(f"greedy consistency: {rounds} rounds of {steps:,} env steps")
-    result = refine_run(run, rounds, steps, epochs, learning_rate, episodes, force, name,
-                        on_round=lambda r: console.print(
-                            f"round: {r.env_steps:,} env steps, {r.successes}/{r.episodes} episodes reached the "
-                            f"goal, {r.labels:,} labels; fit loss {r.loss:.3f}, accuracy {r.accuracy:.2f}"))
+    result = refine_run(run, rounds, steps, epochs, learning_rate, episodes, force, name, on_round=_show_round)
     for label, key in (("greedy", "final_alone_greedy"), ("sampled", "final_alone")):
         if key in result:
             console.print(f"the refined policy alone, {label}: success {result[key]['success_rate']:.2f} over "

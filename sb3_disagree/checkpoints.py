@@ -93,6 +93,14 @@ def save_checkpoint(model: Any, run_dir: Path, with_buffer: bool = True) -> Path
     return folder
 
 
+def replace_model(model: Any, run_dir: Path) -> None:
+    """Write ``model`` as ``run_dir/model.zip`` by a rename (a crash leaves the old file or the new, whole)."""
+    tmp = run_dir / ".model.zip.tmp"
+    model.save(tmp)
+    _fsync(tmp)
+    os.replace(tmp, run_dir / "model.zip")
+
+
 def latest_checkpoint(run_dir: Path) -> Optional[tuple[Path, dict[str, Any]]]:
     """The newest complete checkpoint whose files match their hashes, with its state; None where there is none."""
     root = run_dir / CHECKPOINTS

@@ -1,6 +1,7 @@
 """The greedy-consistency phase: loops cut by hand, a looping greedy policy made to reach the goal, dopt consistency."""
 
 import json
+import sys
 
 import numpy as np
 import pytest
@@ -12,7 +13,7 @@ from stable_baselines3.common.evaluation import evaluate_policy
 from typer.testing import CliRunner
 
 from sb3_disagree import ACER
-from sb3_disagree.acer.consistency import collect_escapes, greedy_consistency, loop_free_labels
+from sb3_disagree.acer.consistency import RoundStats, collect_escapes, greedy_consistency, loop_free_labels
 from sb3_disagree.cli.app import app
 
 runner = CliRunner()
@@ -107,16 +108,76 @@ def test_dopt_consistency_writes_beside_the_run_and_never_over_it(tmp_path):
     assert runner.invoke(app, [*args, "--name", "short"]).exit_code == 0 and (run_dir / "short" / "model.zip").exists()
 
 
-def test_dopt_train_runs_the_phase_after_training_when_asked(tmp_path):
+def test_dopt_train_refines_model_zip_when_asked_and_resume_keeps_it(tmp_path, monkeypatch):
+    # The phase's learning is tested above; here what dopt train does with it, on a phase that shifts the logits.
+    def shifting_phase(model, env, rounds, steps, seed=0, on_round=None):
+        with th.no_grad():
+            for p in model.policy.acting_net.parameters():
+                p.add_(0.1)
+        history = [RoundStats(steps, 3, 2, 10, 0.5, 0.9) for _ in range(rounds)]
+        for stats in history:
+            on_round(stats)
+        return history
+
+    import sb3_disagree.run  # noqa: F401  (the module, shadowed on the package by its train function)
+
+    monkeypatch.setattr(sys.modules["sb3_disagree.run.train"], "greedy_consistency", shifting_phase)
     base = ["train", "--goal", "bathtub", "--env", "sb3_disagree/ApartmentState-v0", "--mode", "scratch", "--steps",
             "200", "--n-envs", "2", "--card-episodes", "2", "--out", str(tmp_path)]
-    bad = runner.invoke(app, [*base, "--consistency-rounds", "-1"])
-    assert bad.exit_code == 2 and "--consistency-rounds" in bad.output and not list(tmp_path.iterdir())
-    ppo = runner.invoke(app, [*base, "--mode", "ppo", "--consistency-rounds", "1"])
-    assert ppo.exit_code == 2 and not list(tmp_path.iterdir())
-    result = runner.invoke(app, [*base, "--consistency-rounds", "1"])
+    for bad in (["--consistency-rounds", "-1"], ["--consistency-rounds", "1", "--consistency-steps", "2"],
+                ["--mode", "ppo", "--consistency-rounds", "1"]):
+        result = runner.invoke(app, [*base, *bad])
+        assert result.exit_code == 2 and "--consistency-" in result.output and not list(tmp_path.iterdir())
+    result = runner.invoke(app, [*base, "--consistency-rounds", "2", "--consistency-steps", "4000"])
     assert result.exit_code == 0, result.output
+    assert result.output.count("greedy consistency, a round: 4,000 env steps") == 2
+    assert "done: 200 steps of training and 8,000 of the greedy-consistency phase" in result.output
     (run_dir,) = tmp_path.glob("*/bathtub/scratch-0")
-    out = json.loads((run_dir / "consistent" / "result.json").read_text())
-    assert out["rounds"] == 1 and out["env_steps"] == 20_000 and out["final_alone_greedy"]["episodes"] == 2
-    assert "the refined policy alone, greedy" in result.output
+    phase = yaml.safe_load((run_dir / "config.yaml").read_text())["consistency"]
+    assert phase["num_timesteps"] == 200 and phase["env_steps"] == 8000 and len(phase["per_round"]) == 2
+    (checkpoint,) = (run_dir / "checkpoints").iterdir()
+    trained, refined = ACER.load(checkpoint / "model.zip"), ACER.load(run_dir / "model.zip")
+    obs = np.random.default_rng(0).uniform(-1, 1, (64, 4)).astype(np.float32)
+    assert not np.allclose(_probs(trained, obs), _probs(refined, obs), atol=1e-4)
+    # Resuming the finished run redoes nothing: the refined model stays (no phase on the trained one again).
+    before = (run_dir / "model.zip").read_bytes()
+    again = runner.invoke(app, ["train", "--goal", "bathtub", "--resume", str(run_dir), "--card-episodes", "0"])
+    assert again.exit_code == 0, again.output
+    assert "greedy consistency" not in again.output and (run_dir / "model.zip").read_bytes() == before
+
+
+def test_an_interrupted_phase_leaves_the_trained_model_and_resume_redoes_it(tmp_path, monkeypatch):
+    import sb3_disagree.run  # noqa: F401
+
+    module = sys.modules["sb3_disagree.run.train"]
+    calls = []
+
+    def interrupted(model, env, rounds, steps, seed=0, on_round=None):
+        calls.append("interrupted")
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(module, "greedy_consistency", interrupted)
+    args = ["train", "--goal", "bathtub", "--env", "sb3_disagree/ApartmentState-v0", "--mode", "scratch", "--steps",
+            "200", "--n-envs", "2", "--card-episodes", "0", "--out", str(tmp_path), "--consistency-rounds", "1"]
+    result = runner.invoke(app, args)
+    (run_dir,) = tmp_path.glob("*/bathtub/scratch-0")
+    assert result.exit_code == 130 and "interrupted in the greedy-consistency phase" in result.output
+    saved = yaml.safe_load((run_dir / "config.yaml").read_text())
+    assert saved["finished"] and "consistency" not in saved
+    (checkpoint,) = (run_dir / "checkpoints").iterdir()
+    assert (checkpoint / "model.zip").read_bytes() == (run_dir / "model.zip").read_bytes()  # the trained policy
+
+    def phase(model, env, rounds, steps, seed=0, on_round=None):
+        calls.append("done")
+        return [RoundStats(steps, 1, 1, 1, 0.0, 1.0)]
+
+    monkeypatch.setattr(module, "greedy_consistency", phase)
+    again = runner.invoke(app, ["train", "--goal", "bathtub", "--resume", str(run_dir), "--card-episodes", "0"])
+    assert again.exit_code == 0, again.output
+    assert calls == ["interrupted", "done"]
+    assert yaml.safe_load((run_dir / "config.yaml").read_text())["consistency"]["env_steps"] == 20_000
+
+
+def _probs(model, obs):
+    with th.no_grad():
+        return model.policy.get_distribution(th.as_tensor(obs)).distribution.probs.numpy()

@@ -79,6 +79,9 @@ class RunConfig:
     :param greedy_epsilon: The policy's own weight in the behaviour during the greedy phase, in (0, 1]
     :param checkpoint_every: Write a checkpoint (model, replay buffer, log positions) every this many env steps;
         0 only at the end
+    :param consistency_rounds: After training, this many rounds of the greedy-consistency phase (docs/method.md):
+        the saved ``model.zip`` is then the refined policy, the trained one stays in the last checkpoint (0: none)
+    :param consistency_steps: Env steps of each round of the phase, over 4 envs of their own
     """
 
     goal: str
@@ -106,6 +109,8 @@ class RunConfig:
     record_trajectories: bool = False
     greedy_phase: int = 0
     greedy_epsilon: float = 0.2
+    consistency_rounds: int = 0
+    consistency_steps: int = 20_000
 
     def __post_init__(self) -> None:
         if isinstance(self.acer_kwargs, dict) and isinstance(self.mode, str):  # anything else: validate() says so
@@ -149,6 +154,11 @@ class RunConfig:
                              f"{self.greedy_phase} and {self.greedy_epsilon}")
         if self.greedy_phase and self.mode == "ppo":
             raise ValueError("--greedy-phase is a behaviour of ACER; --mode ppo trains SB3's PPO without one")
+        if self.consistency_rounds < 0 or (self.consistency_rounds and self.consistency_steps < 4):
+            raise ValueError("--consistency-rounds must be >= 0 and --consistency-steps >= 4 (one per env), got "
+                             f"{self.consistency_rounds} and {self.consistency_steps}")
+        if self.consistency_rounds and self.mode == "ppo":
+            raise ValueError("--consistency-rounds refines an ACER policy; --mode ppo trains SB3's PPO")
         if self.mode == "ppo":  # ACER's settings beyond the defaults (--reward-scale, --ema-decay) would be ignored
             given = [k for k, v in self.acer_kwargs.items() if acer_defaults(self.mode).get(k) != v]
             if given:

@@ -16,6 +16,13 @@ from sb3_disagree.run.evaluation import evaluate_both, load_run
 FOLDER = "consistent"  # inside the run: model.zip and result.json of the refined policy
 
 
+def consistency_env(config: dict[str, Any]) -> Any:
+    """The phase's 4 envs: the run's task and env settings, on env seeds of their own (the run's seed +
+    ``CONSISTENCY_SEED_OFFSET``), apart from its training and evaluation seeds."""
+    return make_vec(config["env_id"], config["goal"], config.get("env_kwargs") or {}, n_envs=4,
+                    seed=config.get("seed", 0) + CONSISTENCY_SEED_OFFSET)
+
+
 def refine_run(run_dir: Path, rounds: int = 3, steps: int = 20_000, epochs: int = 3, learning_rate: float = 3e-4,
                episodes: int = 100, force: bool = False, name: str = FOLDER,
                on_round: Optional[Callable[[RoundStats], None]] = None) -> dict[str, Any]:
@@ -48,8 +55,7 @@ def refine_run(run_dir: Path, rounds: int = 3, steps: int = 20_000, epochs: int 
     config, model = load_run(run_dir)
     if not isinstance(model, ACER):
         raise ValueError("the greedy-consistency phase refines an ACER policy; this run trained PPO")
-    env = make_vec(config["env_id"], config["goal"], config.get("env_kwargs") or {}, n_envs=4,
-                   seed=config.get("seed", 0) + CONSISTENCY_SEED_OFFSET)
+    env = consistency_env(config)
     start = time.perf_counter()
     try:
         history = greedy_consistency(model, env, rounds, steps, epochs, learning_rate, seed=config.get("seed", 0),

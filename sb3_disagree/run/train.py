@@ -11,6 +11,7 @@ and its history (monitor files, ``progress.csv``, ``evaluations.npz``), so its c
 import os
 import pickle
 import shutil
+import time
 import zipfile
 from collections.abc import Callable
 from dataclasses import asdict, fields
@@ -22,7 +23,9 @@ from stable_baselines3.common.callbacks import BaseCallback, CallbackList
 
 from sb3_disagree.acer import ACER
 from sb3_disagree.behaviour import GreedyPhase, OnPolicyBehaviour
-from sb3_disagree.checkpoints import Checkpoint, latest_checkpoint, save_checkpoint, sigterm_as_interrupt, truncate_logs
+from sb3_disagree.acer.consistency import RoundStats, greedy_consistency
+from sb3_disagree.checkpoints import (Checkpoint, latest_checkpoint, replace_model, save_checkpoint,
+                                      sigterm_as_interrupt, truncate_logs)
 from sb3_disagree.files import write_atomic
 from sb3_disagree.options import PriorSet, make_options
 from sb3_disagree.priors.select import choose_priors, guide_horizon
@@ -35,7 +38,8 @@ from sb3_disagree.run.trajectories import RecordTrajectories
 
 def train(config: RunConfig, out: Path = Path("runs"), resume: Optional[Path] = None,
           callbacks: Optional[list[BaseCallback]] = None, on_priors: Optional[Callable[[list, list], None]] = None,
-          run_dir: Optional[Path] = None, steps: Optional[int] = None, force: bool = False) -> tuple[Path, ACER, bool]:
+          run_dir: Optional[Path] = None, steps: Optional[int] = None, force: bool = False,
+          on_round: Optional[Callable[[RoundStats], None]] = None) -> tuple[Path, ACER, bool]:
     """
     Train a new policy with the method (or from scratch, or a peer method), writing the run folder.
 
@@ -51,9 +55,11 @@ def train(config: RunConfig, out: Path = Path("runs"), resume: Optional[Path] = 
     :param run_dir: Write the run here instead of under ``out`` (experiments choose their own layout)
     :param steps: With ``resume``, the run's new total of env steps (default: the saved one)
     :param force: Replace an existing run in the folder (without it, an existing run is an error)
-    :return: The run folder, the model, and whether training finished (False when interrupted)
+    :param on_round: Called with each round's statistics of the greedy-consistency phase
+        (``config.consistency_rounds``), which follows a finished training; ``model.zip`` is then its policy
+    :return: The run folder, the model, and whether training (and the phase) finished (False when interrupted)
     """
-    checkpoint = None
+    checkpoint, saved = None, {}
     if resume is not None:
         run_dir = Path(resume)
         if not (run_dir / "config.yaml").exists() or not (run_dir / "model.zip").exists():
@@ -66,6 +72,10 @@ def train(config: RunConfig, out: Path = Path("runs"), resume: Optional[Path] = 
             if steps < done:
                 raise ValueError(f"--steps {steps} is below the {done:,} steps {run_dir} has already trained")
             config.steps = steps
+        phase = saved.get("consistency") or {}
+        if saved.get("finished") and done >= config.steps and phase.get("num_timesteps") == done:
+            # Trained and refined to this budget already: model.zip is the refined policy, nothing to redo.
+            return run_dir, _load(config, run_dir / "model.zip", run_dir), True
         if checkpoint is not None:  # the history continues from the checkpoint: what came after it is cut
             truncate_logs(run_dir, checkpoint[1]["logs"])
     config.validate()
@@ -131,7 +141,38 @@ def train(config: RunConfig, out: Path = Path("runs"), resume: Optional[Path] = 
     if (run_dir / "replay_buffer.pkl").exists():  # left by a version that kept it beside the model
         os.remove(run_dir / "replay_buffer.pkl")
     env.close()
+    if finished and config.consistency_rounds:
+        model, finished = _refine(config, run_dir, model, saved_config, on_round)
     return run_dir, model, finished
+
+
+def _refine(config: RunConfig, run_dir: Path, model: ACER, saved_config: dict,
+            on_round: Optional[Callable[[RoundStats], None]]) -> tuple[ACER, bool]:
+    """
+    The greedy-consistency phase after a finished training: the refined policy replaces ``model.zip`` (the
+    trained one stays in the last checkpoint, which a resumed run continues from) and ``config.yaml`` records the
+    phase. An interrupted phase leaves the trained ``model.zip``; ``--resume`` redoes it.
+    """
+    from sb3_disagree.run.consistency import consistency_env
+
+    env = consistency_env(saved_config)
+    start = time.perf_counter()
+    try:
+        with sigterm_as_interrupt():
+            history = greedy_consistency(model, env, config.consistency_rounds, config.consistency_steps,
+                                         seed=config.seed, on_round=on_round)
+    except KeyboardInterrupt:
+        return model, False
+    finally:
+        env.close()
+    with sigterm_as_interrupt():
+        replace_model(model, run_dir)
+        saved_config["consistency"] = {"num_timesteps": int(model.num_timesteps),
+                                       "env_steps": sum(r.env_steps for r in history),
+                                       "seconds": round(time.perf_counter() - start, 1),
+                                       "per_round": [r.as_dict() for r in history]}
+        write_atomic(run_dir / "config.yaml", yaml.safe_dump(saved_config, sort_keys=False))
+    return model, True
 
 
 
@@ -165,15 +206,22 @@ def check_resume(config: RunConfig, resume: Path, force: bool = False) -> None:
         flags = ", ".join("--env" if name == "env_id" else "--" + name.replace("_", "-") for name in given)
         raise ValueError(f"--resume continues {resume} with its saved settings; drop {flags}")
 
+def _load(config: RunConfig, path: Path, run_dir: Path, **kwargs):
+    try:
+        if config.mode == "ppo":
+            return algorithm_of(config.mode).load(path, env=kwargs.get("env"))
+        return ACER.load(path, **kwargs)
+    except (EOFError, OSError, ValueError, zipfile.BadZipFile, pickle.UnpicklingError) as exc:
+        raise ValueError(f"{run_dir} cannot be resumed: its saved model is damaged ({exc})") from None
+
+
 def _resumed_model(config: RunConfig, run_dir: Path, env, behaviour, checkpoint):
     """The model a resumed run continues: from its newest complete checkpoint (with the replay buffer it kept),
     else from ``model.zip`` (and a ``replay_buffer.pkl`` beside it, as earlier versions left them)."""
     folder = checkpoint[0] if checkpoint else run_dir
+    model = _load(config, folder / "model.zip", run_dir, env=env,
+                  **({} if config.mode == "ppo" else {"behaviour": behaviour, "overlap": config.overlap}))
     try:
-        if config.mode == "ppo":
-            model = algorithm_of(config.mode).load(folder / "model.zip", env=env)
-        else:
-            model = ACER.load(folder / "model.zip", env=env, behaviour=behaviour, overlap=config.overlap)
         if (folder / "replay_buffer.pkl").exists() and isinstance(model, ACER):
             model.load_replay_buffer(folder / "replay_buffer.pkl")
     except (EOFError, OSError, ValueError, zipfile.BadZipFile, pickle.UnpicklingError) as exc:
