@@ -161,8 +161,8 @@ def _refine(config: RunConfig, run_dir: Path, model: ACER, saved_config: dict,
         with sigterm_as_interrupt():
             history = greedy_consistency(model, env, config.consistency_rounds, config.consistency_steps,
                                          seed=config.seed, on_round=on_round)
-    except KeyboardInterrupt:
-        return model, False
+    except KeyboardInterrupt:  # the weights are half fitted: hand back the trained policy that model.zip holds
+        return _load(config, run_dir / "model.zip", run_dir), False
     finally:
         env.close()
     with sigterm_as_interrupt():
@@ -173,7 +173,6 @@ def _refine(config: RunConfig, run_dir: Path, model: ACER, saved_config: dict,
                                        "per_round": [r.as_dict() for r in history]}
         write_atomic(run_dir / "config.yaml", yaml.safe_dump(saved_config, sort_keys=False))
     return model, True
-
 
 
 def check_resume(config: RunConfig, resume: Path, force: bool = False) -> None:
@@ -205,6 +204,7 @@ def check_resume(config: RunConfig, resume: Path, force: bool = False) -> None:
         given = [k for name in given for k in (config.env_kwargs if name == "env_kwargs" else [name])]
         flags = ", ".join("--env" if name == "env_id" else "--" + name.replace("_", "-") for name in given)
         raise ValueError(f"--resume continues {resume} with its saved settings; drop {flags}")
+
 
 def _load(config: RunConfig, path: Path, run_dir: Path, **kwargs):
     try:
