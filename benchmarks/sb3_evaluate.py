@@ -1,7 +1,7 @@
 """
-A saved model as a user meets it: ``ACER.load`` and SB3's own ``evaluate_policy`` on the env as registered,
-greedy and sampled side by side (success counted from ``info["is_success"]``), from one env seed the runs never
-trained or evaluated on.
+A saved model as a user meets it: ``ACER.load`` and SB3's own ``evaluate_policy`` (through the package's
+``evaluate``, which counts success from ``info["is_success"]``) on the env as registered, greedy and sampled side by
+side, from one env seed the runs never trained or evaluated on.
 
     python benchmarks/sb3_evaluate.py RUN/model.zip [RUN/checkpoints/000000100000/model.zip ...] \
         [--goal bathtub] [--episodes 100] [--seed 777]
@@ -10,10 +10,10 @@ trained or evaluated on.
 import argparse
 
 from stable_baselines3.common.env_util import make_vec_env
-from stable_baselines3.common.evaluation import evaluate_policy
 
 from sb3_disagree import ACER
 from sb3_disagree.defaults import DEFAULT_ENV
+from sb3_disagree.evaluation import evaluate  # SB3's evaluate_policy, success counted from is_success
 
 
 def main() -> None:
@@ -27,12 +27,9 @@ def main() -> None:
         model, row = ACER.load(path), []
         for deterministic in (True, False):
             env = make_vec_env(DEFAULT_ENV, n_envs=4, seed=args.seed, env_kwargs=dict(goal=args.goal))
-            successes: list[bool] = []
-            evaluate_policy(model, env, n_eval_episodes=args.episodes, deterministic=deterministic,
-                            callback=lambda l, g: successes.append(bool(l["info"].get("is_success"))) if l["done"] else None)
+            result = evaluate(model, env, args.episodes, deterministic)
             env.close()
-            row.append(f"{'greedy' if deterministic else 'sampled'} {sum(successes) / len(successes):.2f} "
-                       f"({len(successes)} episodes)")
+            row.append(f"{'greedy' if deterministic else 'sampled'} {result.success_rate:.2f} ({result.episodes} episodes)")
         print(f"{path}: " + ", ".join(row), flush=True)
 
 

@@ -84,8 +84,7 @@ def save_checkpoint(model: Any, run_dir: Path, with_buffer: bool = True) -> Path
     os.replace(tmp, folder)
     # The model users load sits at the run's root: a copy, swapped in by a rename.
     shutil.copyfile(folder / "model.zip", run_dir / ".model.zip.tmp")
-    _fsync(run_dir / ".model.zip.tmp")
-    os.replace(run_dir / ".model.zip.tmp", run_dir / "model.zip")
+    _swap_in(run_dir / ".model.zip.tmp", run_dir / "model.zip")
     # The two newest, or only the last where the run has finished (no replay buffer kept: nothing to fall back to).
     keep = KEEP if with_buffer else 1
     for old in sorted(p for p in root.iterdir() if p.is_dir() and not p.name.startswith("."))[:-keep]:
@@ -95,10 +94,13 @@ def save_checkpoint(model: Any, run_dir: Path, with_buffer: bool = True) -> Path
 
 def replace_model(model: Any, run_dir: Path) -> None:
     """Write ``model`` as ``run_dir/model.zip`` by a rename (a crash leaves the old file or the new, whole)."""
-    tmp = run_dir / ".model.zip.tmp"
-    model.save(tmp)
+    model.save(run_dir / ".model.zip.tmp")
+    _swap_in(run_dir / ".model.zip.tmp", run_dir / "model.zip")
+
+
+def _swap_in(tmp: Path, path: Path) -> None:
     _fsync(tmp)
-    os.replace(tmp, run_dir / "model.zip")
+    os.replace(tmp, path)
 
 
 def latest_checkpoint(run_dir: Path) -> Optional[tuple[Path, dict[str, Any]]]:

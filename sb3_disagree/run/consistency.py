@@ -67,7 +67,8 @@ def refine_run(run_dir: Path, rounds: int = 3, steps: int = 20_000, epochs: int 
         shutil.rmtree(out)
     out.mkdir()
     model.save(out / "model.zip")
-    (out / "config.yaml").write_text((run_dir / "config.yaml").read_text())  # dopt eval reads the env and goal beside the model
+    # dopt eval reads the env and goal beside the model
+    (out / "config.yaml").write_text((run_dir / "config.yaml").read_text())
     evaluations = evaluate_both(model, config, episodes) if episodes > 0 else {}
     result = {"rounds": rounds, "steps_per_round": steps, "epochs": epochs, "learning_rate": learning_rate,
               "env_steps": sum(r.env_steps for r in history), "seconds": round(seconds, 1),

@@ -206,11 +206,12 @@ def check_resume(config: RunConfig, resume: Path, force: bool = False) -> None:
         raise ValueError(f"--resume continues {resume} with its saved settings; drop {flags}")
 
 
-def _load(config: RunConfig, path: Path, run_dir: Path, **kwargs):
+def _load(config: RunConfig, path: Path, run_dir: Path, env=None, behaviour=None):
+    """A run's saved model (with its envs and behaviour, to continue training), or a one-line error if damaged."""
     try:
         if config.mode == "ppo":
-            return algorithm_of(config.mode).load(path, env=kwargs.get("env"))
-        return ACER.load(path, **kwargs)
+            return algorithm_of(config.mode).load(path, env=env)
+        return ACER.load(path, env=env, behaviour=behaviour, overlap=config.overlap)
     except (EOFError, OSError, ValueError, zipfile.BadZipFile, pickle.UnpicklingError) as exc:
         raise ValueError(f"{run_dir} cannot be resumed: its saved model is damaged ({exc})") from None
 
@@ -219,8 +220,7 @@ def _resumed_model(config: RunConfig, run_dir: Path, env, behaviour, checkpoint)
     """The model a resumed run continues: from its newest complete checkpoint (with the replay buffer it kept),
     else from ``model.zip`` (and a ``replay_buffer.pkl`` beside it, as earlier versions left them)."""
     folder = checkpoint[0] if checkpoint else run_dir
-    model = _load(config, folder / "model.zip", run_dir, env=env,
-                  **({} if config.mode == "ppo" else {"behaviour": behaviour, "overlap": config.overlap}))
+    model = _load(config, folder / "model.zip", run_dir, env, behaviour)
     try:
         if (folder / "replay_buffer.pkl").exists() and isinstance(model, ACER):
             model.load_replay_buffer(folder / "replay_buffer.pkl")
