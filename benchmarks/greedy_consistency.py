@@ -24,6 +24,8 @@ def main() -> None:
     parser.add_argument("--rounds", type=int, default=3)
     parser.add_argument("--steps", type=int, default=20_000)
     parser.add_argument("--epochs", type=int, default=3)
+    parser.add_argument("--sampling", default="loops", choices=["loops", "always"],
+                        help="where the collection samples: in loops only (greedy elsewhere), or every action")
     parser.add_argument("--name", default=FOLDER, help="the folder inside each run (one per setting)")
     parser.add_argument("--force", action="store_true", help="redo seeds already refined")
     parser.add_argument("--threads", type=int, default=1, help="torch threads (1: two such processes on two cores)")
@@ -35,6 +37,7 @@ def main() -> None:
         done = run / args.name / "result.json"
         if args.force or not done.exists():
             refine_run(run, rounds=args.rounds, steps=args.steps, epochs=args.epochs, force=args.force, name=args.name,
+                       sampling=args.sampling,
                        on_round=lambda r, s=seed: print(f"seed {s}: {r}", flush=True))
         before, after = json.loads((run / "result.json").read_text()), json.loads(done.read_text())
         rows.append((seed, before["final_alone_greedy"]["success_rate"], before["final_alone"]["success_rate"],

@@ -107,7 +107,8 @@ def train(**options) -> None:
 
 
 def _show_round(r) -> None:
-    console.print(f"greedy consistency, a round: {r.env_steps:,} env steps, {r.successes}/{r.episodes} episodes "
+    where = f"a round: {r.env_steps:,} env steps" if r.env_steps else "the training's last episodes"
+    console.print(f"greedy consistency, {where}, {r.successes}/{r.episodes} episodes "
                   f"reached the goal, {r.labels:,} labels; fit loss {r.loss:.3f}, accuracy {r.accuracy:.2f}")
 
 
@@ -160,10 +161,16 @@ def _show_end(run_dir: Path, model, finished: bool, goal: str) -> None:
 
     saved = yaml.safe_load((run_dir / "config.yaml").read_text()) or {}
     if finished:
-        phase = saved.get("consistency")
-        console.print(f"done: {model.num_timesteps:,} steps" + (
-            f" of training and {int(phase['env_steps']):,} of the greedy-consistency phase (model.zip is its policy)"
-            if phase else "") + f"; wrote {run_dir}")
+        phase = saved.get("consistency") or {}
+        line = f"done: {model.num_timesteps:,} steps"
+        if phase.get("env_steps"):
+            line += f" of training and {int(phase['env_steps']):,} of the greedy-consistency phase"
+        if phase.get("harvest"):  # labels from the training's own last episodes
+            line += (f" (model.zip fitted to the loop-free paths of the successful episodes of its last "
+                     f"{int(saved['consistency_harvest']):,} training steps)")
+        elif phase:
+            line += " (model.zip is its policy)"
+        console.print(line + f"; wrote {run_dir}")
         return
     if saved.get("finished"):
         console.print(f"[yellow]interrupted[/] in the greedy-consistency phase; {run_dir}/model.zip is the trained "

@@ -13,7 +13,10 @@ from stable_baselines3.common.evaluation import evaluate_policy
 from typer.testing import CliRunner
 
 from sb3_disagree import ACER
-from sb3_disagree.acer.consistency import RoundStats, collect_escapes, greedy_consistency, loop_free_labels
+from stable_baselines3.common.callbacks import BaseCallback
+
+from sb3_disagree.acer.consistency import (HarvestLabels, RoundStats, collect_escapes, greedy_consistency,
+                                          loop_free_labels)
 from sb3_disagree.cli.app import app
 
 runner = CliRunner()
@@ -72,6 +75,52 @@ def test_phase_turns_a_looping_greedy_policy_into_one_that_reaches_the_goal(fram
     assert _greedy_success(model) >= 0.95
 
 
+class _RecordSteps(BaseCallback):
+    """Every env step of training as (observation before it, action, done, success), from what the env returned."""
+
+    def _on_training_start(self) -> None:
+        self.before, self.steps = self.model._last_obs.copy(), []
+
+    def _on_step(self) -> bool:
+        infos = self.locals["infos"]
+        self.steps.append((self.before, self.locals["actions"].copy(), self.locals["dones"].copy(),
+                           [bool(info.get("is_success")) for info in infos]))
+        self.before = self.locals["new_obs"].copy()
+        return True
+
+
+def test_harvest_keeps_the_loop_free_paths_of_training_episodes_after_its_start():
+    env = make_vec_env(TurnEnv, n_envs=4, seed=3)
+    model = ACER("MlpPolicy", env, seed=0, n_steps=10, policy_kwargs=dict(net_arch=[32]))
+    record, harvest = _RecordSteps(), HarvestLabels(start=800)
+    model.learn(2000, callback=[record, harvest])
+    # The same labels computed here from the recorded steps: env by env, from step 200 (800 env steps / 4 envs) on,
+    # an episode's loop-free path when it reached the goal.
+    expected = []
+    for i in range(4):
+        trail = []
+        for before, actions, dones, successes in record.steps[200:]:
+            trail.append((before[i], int(actions[i])))
+            if dones[i]:
+                if successes[i]:
+                    labels = loop_free_labels([o.tobytes() for o, _ in trail], [a for _, a in trail])
+                    expected += [(trail[t][0].tobytes(), a) for t, a in labels]
+                trail = []
+    got = [(x.tobytes(), a) for x, a in zip(harvest.labels.inputs, harvest.labels.actions)]
+    assert len(expected) > 50 and sorted(got) == sorted(expected)
+    assert 0 < harvest.successes <= harvest.episodes
+    # Fitted alone (no round, no env step): where a pose's labels have a strict majority, the argmax is it.
+    history = greedy_consistency(model, None, rounds=0, epochs=200, learning_rate=3e-3, harvest=harvest)
+    assert history[0].env_steps == 0 and history[0].labels == len(expected)
+    votes: dict[bytes, list[int]] = {}
+    for key, action in expected:
+        votes.setdefault(key, []).append(action)
+    majority = {k: np.bincount(v, minlength=3).argmax() for k, v in votes.items()
+                if np.bincount(v).max() * 2 > len(v)}
+    obs = np.stack([np.frombuffer(k, dtype=np.float32) for k in majority])
+    assert len(majority) >= 5 and (_probs(model, obs).argmax(1) == np.array(list(majority.values()))).all()
+
+
 def test_phase_refuses_bad_settings():
     with pytest.raises(ValueError, match="rounds and epochs"):
         greedy_consistency(_spinning_model(), make_vec_env(TurnEnv, n_envs=4), rounds=0)
@@ -110,7 +159,7 @@ def test_dopt_consistency_writes_beside_the_run_and_never_over_it(tmp_path):
 
 def test_dopt_train_refines_model_zip_when_asked_and_resume_keeps_it(tmp_path, monkeypatch):
     # The phase's learning is tested above; here what dopt train does with it, on a phase that shifts the logits.
-    def shifting_phase(model, env, rounds, steps, seed=0, on_round=None):
+    def shifting_phase(model, env, rounds, steps, seed=0, on_round=None, harvest=None):
         with th.no_grad():
             for p in model.policy.acting_net.parameters():
                 p.add_(0.1)
@@ -152,7 +201,7 @@ def test_an_interrupted_phase_leaves_the_trained_model_and_resume_redoes_it(tmp_
     module = sys.modules["sb3_disagree.run.train"]
     calls = []
 
-    def interrupted(model, env, rounds, steps, seed=0, on_round=None):
+    def interrupted(model, env, rounds, steps, seed=0, on_round=None, harvest=None):
         calls.append("interrupted")
         raise KeyboardInterrupt
 
@@ -167,7 +216,7 @@ def test_an_interrupted_phase_leaves_the_trained_model_and_resume_redoes_it(tmp_
     (checkpoint,) = (run_dir / "checkpoints").iterdir()
     assert (checkpoint / "model.zip").read_bytes() == (run_dir / "model.zip").read_bytes()  # the trained policy
 
-    def phase(model, env, rounds, steps, seed=0, on_round=None):
+    def phase(model, env, rounds, steps, seed=0, on_round=None, harvest=None):
         calls.append("done")
         return [RoundStats(steps, 1, 1, 1, 0.0, 1.0)]
 
@@ -181,3 +230,25 @@ def test_an_interrupted_phase_leaves_the_trained_model_and_resume_redoes_it(tmp_
 def _probs(model, obs):
     with th.no_grad():
         return model.policy.get_distribution(th.as_tensor(obs)).distribution.probs.numpy()
+
+
+def test_dopt_train_fits_model_zip_to_the_harvest_of_its_own_episodes(tmp_path):
+    base = ["train", "--goal", "bathtub", "--env", "sb3_disagree/ApartmentState-v0", "--mode", "scratch", "--steps",
+            "600", "--n-envs", "2", "--card-episodes", "0", "--out", str(tmp_path)]
+    for bad in (["--consistency-harvest", "601"], ["--consistency-harvest", "-1"],
+                ["--mode", "ppo", "--consistency-harvest", "100"]):
+        result = runner.invoke(app, [*base, *bad])
+        assert result.exit_code == 2 and "--consistency-harvest" in result.output and not list(tmp_path.iterdir())
+    result = runner.invoke(app, [*base, "--consistency-harvest", "600"])
+    assert result.exit_code == 0, result.output
+    assert "greedy consistency, the training's last episodes" in result.output
+    assert "done: 600 steps (model.zip fitted to the loop-free paths of the successful episodes of its last 600" \
+        in result.output
+    (run_dir,) = tmp_path.glob("*/bathtub/scratch-0")
+    phase = yaml.safe_load((run_dir / "config.yaml").read_text())["consistency"]
+    assert phase["env_steps"] == 0 and phase["per_round"][0]["labels"] == phase["harvest"]["labels"]
+    (checkpoint,) = (run_dir / "checkpoints").iterdir()
+    trained, refined = ACER.load(checkpoint / "model.zip"), ACER.load(run_dir / "model.zip")
+    obs = np.random.default_rng(0).uniform(-1, 1, (64, 4)).astype(np.float32)
+    changed = not np.allclose(_probs(trained, obs), _probs(refined, obs), atol=1e-4)
+    assert changed == (phase["harvest"]["labels"] > 0)

@@ -15,6 +15,7 @@ from typing import Any, Optional
 
 import numpy as np
 import torch as th
+from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.preprocessing import maybe_transpose
 from stable_baselines3.common.vec_env import VecEnv
 
@@ -69,7 +70,32 @@ class _Labels:
     actions: list[int] = field(default_factory=list)
 
 
-def collect_escapes(model: Any, env: VecEnv, steps: int, rng: np.random.Generator) -> tuple[_Labels, dict[str, int]]:
+class _Trails:
+    """Each env's episode under way (inputs, pose keys, actions); at its end, its loop-free path is kept as labels
+    if it reached the goal."""
+
+    def __init__(self, n_envs: int) -> None:
+        self.trails: list[list[tuple[np.ndarray, bytes, int]]] = [[] for _ in range(n_envs)]
+        self.labels, self.episodes, self.successes = _Labels(), 0, 0
+
+    def add(self, i: int, net_input: np.ndarray, key: bytes, action: int) -> None:
+        self.trails[i].append((net_input.copy(), key, int(action)))
+
+    def end(self, i: int, success: bool) -> None:
+        trail, self.trails[i] = self.trails[i], []
+        self.episodes += 1
+        if success:
+            self.successes += 1
+            for t, action in loop_free_labels([key for _, key, _ in trail], [a for _, _, a in trail]):
+                self.labels.inputs.append(trail[t][0])
+                self.labels.actions.append(action)
+
+
+SAMPLING = ("loops", "always")  # where the collection samples instead of acting greedily
+
+
+def collect_escapes(model: Any, env: VecEnv, steps: int, rng: np.random.Generator,
+                    sampling: str = "loops") -> tuple[_Labels, dict[str, int]]:
     """
     Act greedily with the model's acting network, sampling from it only where the newest frame was already seen
     in the episode, for ``steps`` env steps; return the loop-free labels of the episodes that reached the goal
@@ -79,37 +105,34 @@ def collect_escapes(model: Any, env: VecEnv, steps: int, rng: np.random.Generato
     :param env: Envs of its task
     :param steps: Env steps over all envs
     :param rng: Draws of the sampled actions
+    :param sampling: "loops" (greedy, sampling in loops) or "always" (every action sampled, as training acts)
     :return: The labels and counts (env_steps, episodes, successes)
     """
+    if sampling not in SAMPLING:
+        raise ValueError(f"sampling must be one of {SAMPLING}, got {sampling!r}")
     policy, n, k = model.policy, env.num_envs, model.policy.frame_stack
     obs = np.asarray(maybe_transpose(env.reset(), policy.observation_space))  # images: channels first, as stored
     stack = push_frames(None, obs, None, k)
-    trails: list[list[tuple[np.ndarray, bytes, int]]] = [[] for _ in range(n)]
+    trails = _Trails(n)
     seen: list[set[bytes]] = [set() for _ in range(n)]
-    labels, episodes, successes = _Labels(), 0, 0
     for _ in range(max(steps // n, 1)):
         with th.no_grad():  # the acting network's distribution, as predict draws from it
             probs = policy.get_distribution(th.as_tensor(stack, device=policy.device)).distribution.probs.cpu().numpy()
         actions = probs.argmax(-1)
         for i in range(n):
             key = obs[i].tobytes()
-            if key in seen[i]:  # a pose seen before in this episode: the greedy policy loops, so sample
+            if sampling == "always" or key in seen[i]:  # a pose seen before: the greedy policy loops, so sample
                 actions[i] = rng.choice(len(probs[i]), p=probs[i] / probs[i].sum())
             seen[i].add(key)
-            trails[i].append((stack[i].copy(), key, int(actions[i])))
+            trails.add(i, stack[i], key, int(actions[i]))
         new_obs, _, dones, infos = env.step(actions)
         for i in np.flatnonzero(dones):
-            episodes += 1
-            if infos[i].get("is_success"):
-                successes += 1
-                trail = trails[i]
-                for t, action in loop_free_labels([key for _, key, _ in trail], [a for _, _, a in trail]):
-                    labels.inputs.append(trail[t][0])
-                    labels.actions.append(action)
-            trails[i], seen[i] = [], set()
+            trails.end(i, bool(infos[i].get("is_success")))
+            seen[i] = set()
         obs = np.asarray(maybe_transpose(new_obs, policy.observation_space))
         stack = push_frames(stack, obs, dones, k)
-    return labels, {"env_steps": max(steps // n, 1) * n, "episodes": episodes, "successes": successes}
+    return trails.labels, {"env_steps": max(steps // n, 1) * n, "episodes": trails.episodes,
+                           "successes": trails.successes}
 
 
 def fit_labels(policy: Any, inputs: np.ndarray, actions: np.ndarray, epochs: int, learning_rate: float,
@@ -142,16 +165,19 @@ def fit_labels(policy: Any, inputs: np.ndarray, actions: np.ndarray, epochs: int
     return loss_sum / max(len(inputs), 1), correct / max(len(inputs), 1)
 
 
-def greedy_consistency(model: Any, env: VecEnv, rounds: int = 3, steps: int = 20_000, epochs: int = 3,
+def greedy_consistency(model: Any, env: Optional[VecEnv], rounds: int = 3, steps: int = 20_000, epochs: int = 3,
                        learning_rate: float = 3e-4, batch_size: int = 128, seed: int = 0,
-                       on_round: Optional[Any] = None) -> list[RoundStats]:
+                       on_round: Optional[Any] = None, sampling: str = "loops",
+                       harvest: Optional["HarvestLabels"] = None) -> list[RoundStats]:
     """
     The greedy-consistency phase: ``rounds`` times, collect ``steps`` env steps acting greedily (sampling only
     in loops), add the loop-free labels of the successful episodes to those of earlier rounds, and fit the acting
-    network to all of them. The model is changed in place; ``rounds * steps`` env steps are spent.
+    network to all of them. The model is changed in place; ``rounds * steps`` env steps are spent. With
+    ``harvest``, the labels of the training's own last episodes join the first round's; with ``rounds`` 0 they
+    are fitted alone (one fit, no env step spent).
 
     :param model: A trained ACER model
-    :param env: Envs of its task (seeded apart from its training and evaluation envs)
+    :param env: Envs of its task (seeded apart from its training and evaluation envs); None with ``rounds`` 0
     :param rounds: Collect-and-fit rounds
     :param steps: Env steps per round, over all envs
     :param epochs: Passes over the aggregated labels per round
@@ -159,17 +185,25 @@ def greedy_consistency(model: Any, env: VecEnv, rounds: int = 3, steps: int = 20
     :param batch_size: Labels per gradient step
     :param seed: Seed of the sampled actions and the minibatches
     :param on_round: Called with each round's :class:`RoundStats`
-    :return: Each round's statistics
+    :param sampling: Where the collection samples: "loops" (the phase) or "always" (as training acts)
+    :param harvest: The labels a :class:`HarvestLabels` kept during training
+    :return: Each round's statistics (with ``rounds`` 0, the harvest's fit: its episodes, 0 env steps)
     """
-    if rounds < 1 or steps < env.num_envs or epochs < 1:
-        raise ValueError(f"rounds and epochs must be >= 1 and steps >= the number of envs, got {rounds}, {steps}, "
-                         f"{epochs}")
+    if rounds < (0 if harvest is not None else 1) or epochs < 1 or (rounds and steps < env.num_envs):
+        raise ValueError(f"rounds and epochs must be >= 1 (rounds >= 0 with a harvest) and steps >= the number of "
+                         f"envs, got {rounds}, {steps}, {epochs}")
     rng = np.random.default_rng(seed)
-    inputs: list[np.ndarray] = []
-    actions: list[int] = []
+    inputs: list[np.ndarray] = list(harvest.labels.inputs) if harvest is not None else []
+    actions: list[int] = list(harvest.labels.actions) if harvest is not None else []
     history = []
+    if rounds == 0:
+        loss, accuracy = (fit_labels(model.policy, np.stack(inputs), np.asarray(actions, dtype=np.int64), epochs,
+                                     learning_rate, batch_size, rng) if inputs else (float("nan"), float("nan")))
+        history.append(RoundStats(0, harvest.episodes, harvest.successes, len(actions), loss, accuracy))
+        if on_round is not None:
+            on_round(history[-1])
     for _ in range(rounds):
-        labels, counts = collect_escapes(model, env, steps, rng)
+        labels, counts = collect_escapes(model, env, steps, rng, sampling)
         inputs += labels.inputs
         actions += labels.actions
         loss, accuracy = (fit_labels(model.policy, np.stack(inputs), np.asarray(actions, dtype=np.int64), epochs,
@@ -180,3 +214,43 @@ def greedy_consistency(model: Any, env: VecEnv, rounds: int = 3, steps: int = 20
         if on_round is not None:
             on_round(stats)
     return history
+
+
+class HarvestLabels(BaseCallback):
+    """
+    Keep the loop-free paths of ACER's own successful training episodes from env step ``start`` on: labels for
+    :func:`greedy_consistency` from steps the training has spent anyway (an episode under way at ``start`` counts
+    from there: the rest of a path to the goal is a path to the goal).
+
+    :param start: The env step after which steps are kept (the budget minus the harvest)
+    """
+
+    def __init__(self, start: int) -> None:
+        super().__init__()
+        self.start = start
+        self._trails: Optional[_Trails] = None
+
+    def _on_step(self) -> bool:
+        if self.num_timesteps <= self.start:  # num_timesteps counts this step already
+            return True
+        if self._trails is None:
+            self._trails = _Trails(self.training_env.num_envs)
+        # ACER's collect_rollouts: the net's input of this step, and the observation (its newest frame) before it
+        net_inputs, obs = self.locals["observations"][self.locals["step"]], self.model._last_obs
+        for i, action in enumerate(self.locals["actions"]):
+            self._trails.add(i, net_inputs[i], obs[i].tobytes(), int(action))
+        for i in np.flatnonzero(self.locals["dones"]):
+            self._trails.end(i, bool(self.locals["infos"][i].get("is_success")))
+        return True
+
+    @property
+    def labels(self) -> _Labels:
+        return self._trails.labels if self._trails is not None else _Labels()
+
+    @property
+    def episodes(self) -> int:
+        return self._trails.episodes if self._trails is not None else 0
+
+    @property
+    def successes(self) -> int:
+        return self._trails.successes if self._trails is not None else 0

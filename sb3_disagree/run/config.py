@@ -82,6 +82,8 @@ class RunConfig:
     :param consistency_rounds: After training, this many rounds of the greedy-consistency phase (docs/method.md):
         the saved ``model.zip`` is then the refined policy, the trained one stays in the last checkpoint (0: none)
     :param consistency_steps: Env steps of each round of the phase, over 4 envs of their own
+    :param consistency_harvest: The loop-free paths of the training's own successful episodes over its last this
+        many env steps join the phase's labels (no env step more); without rounds they are fitted alone (0: none)
     """
 
     goal: str
@@ -111,6 +113,7 @@ class RunConfig:
     greedy_epsilon: float = 0.2
     consistency_rounds: int = 0
     consistency_steps: int = 20_000
+    consistency_harvest: int = 0
 
     def __post_init__(self) -> None:
         if isinstance(self.acer_kwargs, dict) and isinstance(self.mode, str):  # anything else: validate() says so
@@ -157,8 +160,11 @@ class RunConfig:
         if self.consistency_rounds < 0 or (self.consistency_rounds and self.consistency_steps < 4):
             raise ValueError("--consistency-rounds must be >= 0 and --consistency-steps >= 4 (one per env), got "
                              f"{self.consistency_rounds} and {self.consistency_steps}")
-        if self.consistency_rounds and self.mode == "ppo":
-            raise ValueError("--consistency-rounds refines an ACER policy; --mode ppo trains SB3's PPO")
+        if not 0 <= self.consistency_harvest <= self.steps:
+            raise ValueError(f"--consistency-harvest must be between 0 and --steps, got {self.consistency_harvest}")
+        if (self.consistency_rounds or self.consistency_harvest) and self.mode == "ppo":
+            flag = "--consistency-rounds" if self.consistency_rounds else "--consistency-harvest"
+            raise ValueError(f"{flag} refines an ACER policy; --mode ppo trains SB3's PPO")
         if self.mode == "ppo":  # ACER's settings beyond the defaults (--reward-scale, --ema-decay) would be ignored
             given = [k for k, v in self.acer_kwargs.items() if acer_defaults(self.mode).get(k) != v]
             if given:

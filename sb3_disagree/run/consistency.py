@@ -25,7 +25,7 @@ def consistency_env(config: dict[str, Any]) -> Any:
 
 def refine_run(run_dir: Path, rounds: int = 3, steps: int = 20_000, epochs: int = 3, learning_rate: float = 3e-4,
                episodes: int = 100, force: bool = False, name: str = FOLDER,
-               on_round: Optional[Callable[[RoundStats], None]] = None) -> dict[str, Any]:
+               on_round: Optional[Callable[[RoundStats], None]] = None, sampling: str = "loops") -> dict[str, Any]:
     """
     Run the greedy-consistency phase (:func:`~sb3_disagree.acer.consistency.greedy_consistency`) on a finished
     ACER run's ``model.zip``, on env seeds of its own (the run's seed + ``CONSISTENCY_SEED_OFFSET``), and write the
@@ -41,6 +41,7 @@ def refine_run(run_dir: Path, rounds: int = 3, steps: int = 20_000, epochs: int 
     :param force: Replace an earlier phase's folder
     :param name: The folder inside the run that the refined model goes to
     :param on_round: Called with each round's statistics
+    :param sampling: Where the collection samples: "loops" (greedy elsewhere) or "always"
     :return: The result written to ``consistent/result.json``
     """
     run_dir = Path(run_dir)
@@ -59,7 +60,7 @@ def refine_run(run_dir: Path, rounds: int = 3, steps: int = 20_000, epochs: int 
     start = time.perf_counter()
     try:
         history = greedy_consistency(model, env, rounds, steps, epochs, learning_rate, seed=config.get("seed", 0),
-                                     on_round=on_round)
+                                     on_round=on_round, sampling=sampling)
     finally:
         env.close()
     seconds = time.perf_counter() - start
@@ -71,6 +72,7 @@ def refine_run(run_dir: Path, rounds: int = 3, steps: int = 20_000, epochs: int 
     (out / "config.yaml").write_text((run_dir / "config.yaml").read_text())
     evaluations = evaluate_both(model, config, episodes) if episodes > 0 else {}
     result = {"rounds": rounds, "steps_per_round": steps, "epochs": epochs, "learning_rate": learning_rate,
+              "sampling": sampling,
               "env_steps": sum(r.env_steps for r in history), "seconds": round(seconds, 1),
               "per_round": [r.as_dict() for r in history],
               **{f"final_alone{'_greedy' if label == 'greedy' else ''}": e.as_dict() for label, e in evaluations.items()}}

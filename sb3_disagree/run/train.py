@@ -23,7 +23,7 @@ from stable_baselines3.common.callbacks import BaseCallback, CallbackList
 
 from sb3_disagree.acer import ACER
 from sb3_disagree.behaviour import GreedyPhase, OnPolicyBehaviour
-from sb3_disagree.acer.consistency import RoundStats, greedy_consistency
+from sb3_disagree.acer.consistency import HarvestLabels, RoundStats, greedy_consistency
 from sb3_disagree.checkpoints import (Checkpoint, latest_checkpoint, replace_model, save_checkpoint,
                                       sigterm_as_interrupt, truncate_logs)
 from sb3_disagree.files import write_atomic
@@ -126,6 +126,10 @@ def train(config: RunConfig, out: Path = Path("runs"), resume: Optional[Path] = 
         own.append(EvaluateAlone(config, run_dir, append=resume is not None, upto=model.num_timesteps))
     if config.checkpoint_every:
         own.append(Checkpoint(run_dir, config.checkpoint_every))
+    harvest = None
+    if config.consistency_harvest:  # a resumed run keeps what it trains from here on
+        harvest = HarvestLabels(start=config.steps - config.consistency_harvest)
+        own.append(harvest)
     finished = True
     try:
         with sigterm_as_interrupt():
@@ -141,36 +145,41 @@ def train(config: RunConfig, out: Path = Path("runs"), resume: Optional[Path] = 
     if (run_dir / "replay_buffer.pkl").exists():  # left by a version that kept it beside the model
         os.remove(run_dir / "replay_buffer.pkl")
     env.close()
-    if finished and config.consistency_rounds:
-        model, finished = _refine(config, run_dir, model, saved_config, on_round)
+    if finished and (config.consistency_rounds or harvest is not None):
+        model, finished = _refine(config, run_dir, model, saved_config, on_round, harvest)
     return run_dir, model, finished
 
 
 def _refine(config: RunConfig, run_dir: Path, model: ACER, saved_config: dict,
-            on_round: Optional[Callable[[RoundStats], None]]) -> tuple[ACER, bool]:
+            on_round: Optional[Callable[[RoundStats], None]], harvest: Optional[HarvestLabels]) -> tuple[ACER, bool]:
     """
-    The greedy-consistency phase after a finished training: the refined policy replaces ``model.zip`` (the
-    trained one stays in the last checkpoint, which a resumed run continues from) and ``config.yaml`` records the
-    phase. An interrupted phase leaves the trained ``model.zip``; ``--resume`` redoes it.
+    The greedy-consistency phase after a finished training (its rounds, with the labels harvested from the
+    training's last episodes): the refined policy replaces ``model.zip`` (the trained one stays in the last
+    checkpoint, which a resumed run continues from) and ``config.yaml`` records the phase. An interrupted phase
+    leaves the trained ``model.zip``; ``--resume`` redoes it (with no harvest: the training is over).
     """
     from sb3_disagree.run.consistency import consistency_env
 
-    env = consistency_env(saved_config)
+    env = consistency_env(saved_config) if config.consistency_rounds else None
     start = time.perf_counter()
     try:
         with sigterm_as_interrupt():
             history = greedy_consistency(model, env, config.consistency_rounds, config.consistency_steps,
-                                         seed=config.seed, on_round=on_round)
+                                         seed=config.seed, on_round=on_round, harvest=harvest)
     except KeyboardInterrupt:  # the weights are half fitted: hand back the trained policy that model.zip holds
         return _load(config, run_dir / "model.zip", run_dir), False
     finally:
-        env.close()
+        if env is not None:
+            env.close()
     with sigterm_as_interrupt():
         replace_model(model, run_dir)
         saved_config["consistency"] = {"num_timesteps": int(model.num_timesteps),
                                        "env_steps": sum(r.env_steps for r in history),
                                        "seconds": round(time.perf_counter() - start, 1),
-                                       "per_round": [r.as_dict() for r in history]}
+                                       "per_round": [r.as_dict() for r in history],
+                                       **({"harvest": {"labels": len(harvest.labels.actions),
+                                                       "episodes": harvest.episodes,
+                                                       "successes": harvest.successes}} if harvest else {})}
         write_atomic(run_dir / "config.yaml", yaml.safe_dump(saved_config, sort_keys=False))
     return model, True
 
