@@ -252,3 +252,31 @@ def test_dopt_train_fits_model_zip_to_the_harvest_of_its_own_episodes(tmp_path):
     obs = np.random.default_rng(0).uniform(-1, 1, (64, 4)).astype(np.float32)
     changed = not np.allclose(_probs(trained, obs), _probs(refined, obs), atol=1e-4)
     assert changed == (phase["harvest"]["labels"] > 0)
+
+
+class _RecordProbs(BaseCallback):
+    """Per step: the behaviour's probabilities, and those of the current and the averaged weights on its input."""
+
+    def _on_training_start(self) -> None:
+        self.rows = []
+
+    def _on_step(self) -> bool:
+        policy, obs = self.model.policy, self.locals["obs_tensor"]
+        with th.no_grad():
+            rows = (self.locals["probs"], policy.action_probs(obs), policy.get_distribution(obs).distribution.probs)
+        self.rows.append((self.num_timesteps, *(r.numpy().copy() for r in rows)))
+        return True
+
+
+def test_harvest_from_the_average_acts_by_the_weights_model_zip_acts_with():
+    env = make_vec_env(TurnEnv, n_envs=4, seed=3)
+    model = ACER("MlpPolicy", env, seed=0, n_steps=10, ema_decay=0.9, replay_start=40, learning_rate=0.01,
+                 policy_kwargs=dict(net_arch=[32]))
+    record = _RecordProbs()
+    model.learn(1200, callback=[HarvestLabels(start=800, from_average=True), record])
+    late = [r for r in record.rows if r[0] > 804]  # from the step after the harvest's first
+    early = [r for r in record.rows if 200 < r[0] <= 800]
+    assert all(np.allclose(probs, average) for _, probs, _, average in late)
+    assert all(np.allclose(probs, current) for _, probs, current, _ in early)
+    assert any(not np.allclose(current, average, atol=1e-3) for _, _, current, average in late)  # they differ
+    assert not model.act_with_average  # only during the harvest

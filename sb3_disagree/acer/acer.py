@@ -184,6 +184,9 @@ class ACER(BaseAlgorithm):
         self.distill_states = distill_states
         self.behaviour = behaviour
         self.overlap = overlap
+        # Set by a harvest of the training's own episodes (consistency.HarvestLabels): the behaviour's own branch
+        # samples from the weights model.zip acts with (the moving average), whose paths the harvest fits.
+        self.act_with_average = False
         if _init_setup_model:
             self._setup_model()
 
@@ -212,7 +215,7 @@ class ACER(BaseAlgorithm):
 
     def _excluded_save_params(self) -> list[str]:
         return [*super()._excluded_save_params(), "behaviour", "_last_infos", "_last_stack", "_ent_coef_schedule",
-                "last_rollout_tags"]
+                "last_rollout_tags", "act_with_average"]
 
     def _get_torch_save_params(self) -> tuple[list[str], list[str]]:
         return ["policy", "policy.optimizer"], []
@@ -305,7 +308,9 @@ class ACER(BaseAlgorithm):
         for step in range(self.n_steps):
             observations[step] = self._last_stack
             with th.no_grad():
-                probs = self.policy.action_probs(obs_as_tensor(self._last_stack, self.device))
+                obs_tensor = obs_as_tensor(self._last_stack, self.device)
+                probs = (self.policy.get_distribution(obs_tensor).distribution.probs if self.act_with_average
+                         else self.policy.action_probs(obs_tensor))
             # The behaviour (the priors) sees the single observation its policies were trained on.
             actions, mu, behaviour_step = self._checked_behaviour_step(self._last_obs, probs)
             tags = behaviour_step.tags

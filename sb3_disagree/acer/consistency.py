@@ -223,11 +223,13 @@ class HarvestLabels(BaseCallback):
     from there: the rest of a path to the goal is a path to the goal).
 
     :param start: The env step after which steps are kept (the budget minus the harvest)
+    :param from_average: Over the harvest, the behaviour samples from the weights the model acts with (its moving
+        average, where one is kept) instead of the current ones (ACER's ``mu`` is still the distribution acted by)
     """
 
-    def __init__(self, start: int) -> None:
+    def __init__(self, start: int, from_average: bool = False) -> None:
         super().__init__()
-        self.start = start
+        self.start, self.from_average = start, from_average
         self._trails: Optional[_Trails] = None
 
     def _on_step(self) -> bool:
@@ -235,6 +237,7 @@ class HarvestLabels(BaseCallback):
             return True
         if self._trails is None:
             self._trails = _Trails(self.training_env.num_envs)
+            self.model.act_with_average = self.from_average
         # ACER's collect_rollouts: the net's input of this step, and the observation (its newest frame) before it
         net_inputs, obs = self.locals["observations"][self.locals["step"]], self.model._last_obs
         for i, action in enumerate(self.locals["actions"]):
@@ -242,6 +245,9 @@ class HarvestLabels(BaseCallback):
         for i in np.flatnonzero(self.locals["dones"]):
             self._trails.end(i, bool(self.locals["infos"][i].get("is_success")))
         return True
+
+    def _on_training_end(self) -> None:
+        self.model.act_with_average = False
 
     @property
     def labels(self) -> _Labels:

@@ -84,6 +84,8 @@ class RunConfig:
     :param consistency_steps: Env steps of each round of the phase, over 4 envs of their own
     :param consistency_harvest: The loop-free paths of the training's own successful episodes over its last this
         many env steps join the phase's labels (no env step more); without rounds they are fitted alone (0: none)
+    :param consistency_harvest_average: Over the harvest the new policy acts by the moving average of its weights
+        (what model.zip acts with, ``ema_decay``) instead of the current ones
     """
 
     goal: str
@@ -114,6 +116,7 @@ class RunConfig:
     consistency_rounds: int = 0
     consistency_steps: int = 20_000
     consistency_harvest: int = 0
+    consistency_harvest_average: bool = False
 
     def __post_init__(self) -> None:
         if isinstance(self.acer_kwargs, dict) and isinstance(self.mode, str):  # anything else: validate() says so
