@@ -165,6 +165,9 @@ class RunConfig:
                              f"{self.consistency_rounds} and {self.consistency_steps}")
         if not 0 <= self.consistency_harvest <= self.steps:
             raise ValueError(f"--consistency-harvest must be between 0 and --steps, got {self.consistency_harvest}")
+        if self.consistency_harvest_average and not self.consistency_harvest:
+            raise ValueError("--consistency-harvest-average acts by the average over a harvest: give "
+                             "--consistency-harvest too")
         if (self.consistency_rounds or self.consistency_harvest) and self.mode == "ppo":
             flag = "--consistency-rounds" if self.consistency_rounds else "--consistency-harvest"
             raise ValueError(f"{flag} refines an ACER policy; --mode ppo trains SB3's PPO")
