@@ -106,9 +106,9 @@ def test_harvest_keeps_the_loop_free_paths_of_training_episodes_after_its_start(
                     labels = loop_free_labels([o.tobytes() for o, _ in trail], [a for _, a in trail])
                     expected += [(trail[t][0].tobytes(), a) for t, a in labels]
                 trail = []
-    got = [(x.tobytes(), a) for x, a in zip(harvest.labels.inputs, harvest.labels.actions)]
+    got = [(x.tobytes(), a) for x, a in zip(harvest.trails.labels.inputs, harvest.trails.labels.actions)]
     assert len(expected) > 50 and sorted(got) == sorted(expected)
-    assert 0 < harvest.successes <= harvest.episodes
+    assert 0 < harvest.trails.successes <= harvest.trails.episodes
     # Fitted alone (no round, no env step): where a pose's labels have a strict majority, the argmax is it.
     history = greedy_consistency(model, None, rounds=0, epochs=200, learning_rate=3e-3, harvest=harvest)
     assert history[0].env_steps == 0 and history[0].labels == len(expected)

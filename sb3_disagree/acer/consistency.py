@@ -193,26 +193,25 @@ def greedy_consistency(model: Any, env: Optional[VecEnv], rounds: int = 3, steps
         raise ValueError(f"rounds and epochs must be >= 1 (rounds >= 0 with a harvest) and steps >= the number of "
                          f"envs, got {rounds}, {steps}, {epochs}")
     rng = np.random.default_rng(seed)
-    inputs: list[np.ndarray] = list(harvest.labels.inputs) if harvest is not None else []
-    actions: list[int] = list(harvest.labels.actions) if harvest is not None else []
-    history = []
-    if rounds == 0:
+    trails = harvest.trails if harvest is not None else _Trails(0)
+    inputs, actions = list(trails.labels.inputs), list(trails.labels.actions)
+
+    def fit(env_steps: int, episodes: int, successes: int, labels: int) -> RoundStats:
         loss, accuracy = (fit_labels(model.policy, np.stack(inputs), np.asarray(actions, dtype=np.int64), epochs,
                                      learning_rate, batch_size, rng) if inputs else (float("nan"), float("nan")))
-        history.append(RoundStats(0, harvest.episodes, harvest.successes, len(actions), loss, accuracy))
+        stats = RoundStats(env_steps, episodes, successes, labels, loss, accuracy)
         if on_round is not None:
-            on_round(history[-1])
+            on_round(stats)
+        return stats
+
+    if rounds == 0:
+        return [fit(0, trails.episodes, trails.successes, len(actions))]
+    history = []
     for _ in range(rounds):
         labels, counts = collect_escapes(model, env, steps, rng, sampling)
         inputs += labels.inputs
         actions += labels.actions
-        loss, accuracy = (fit_labels(model.policy, np.stack(inputs), np.asarray(actions, dtype=np.int64), epochs,
-                                     learning_rate, batch_size, rng) if inputs else (float("nan"), float("nan")))
-        stats = RoundStats(counts["env_steps"], counts["episodes"], counts["successes"], len(labels.actions), loss,
-                           accuracy)
-        history.append(stats)
-        if on_round is not None:
-            on_round(stats)
+        history.append(fit(counts["env_steps"], counts["episodes"], counts["successes"], len(labels.actions)))
     return history
 
 
@@ -230,33 +229,22 @@ class HarvestLabels(BaseCallback):
     def __init__(self, start: int, from_average: bool = False) -> None:
         super().__init__()
         self.start, self.from_average = start, from_average
-        self._trails: Optional[_Trails] = None
+        self.trails = _Trails(0)  # what was kept: labels, episodes, successes
+
+    def _init_callback(self) -> None:
+        self.trails = _Trails(self.training_env.num_envs)
 
     def _on_step(self) -> bool:
         if self.num_timesteps <= self.start:  # num_timesteps counts this step already
             return True
-        if self._trails is None:
-            self._trails = _Trails(self.training_env.num_envs)
-            self.model.act_with_average = self.from_average
+        self.model.act_with_average = self.from_average
         # ACER's collect_rollouts: the net's input of this step, and the observation (its newest frame) before it
         net_inputs, obs = self.locals["observations"][self.locals["step"]], self.model._last_obs
         for i, action in enumerate(self.locals["actions"]):
-            self._trails.add(i, net_inputs[i], obs[i].tobytes(), int(action))
+            self.trails.add(i, net_inputs[i], obs[i].tobytes(), int(action))
         for i in np.flatnonzero(self.locals["dones"]):
-            self._trails.end(i, bool(self.locals["infos"][i].get("is_success")))
+            self.trails.end(i, bool(self.locals["infos"][i].get("is_success")))
         return True
 
     def _on_training_end(self) -> None:
         self.model.act_with_average = False
-
-    @property
-    def labels(self) -> _Labels:
-        return self._trails.labels if self._trails is not None else _Labels()
-
-    @property
-    def episodes(self) -> int:
-        return self._trails.episodes if self._trails is not None else 0
-
-    @property
-    def successes(self) -> int:
-        return self._trails.successes if self._trails is not None else 0

@@ -177,9 +177,9 @@ def _refine(config: RunConfig, run_dir: Path, model: ACER, saved_config: dict,
                                        "env_steps": sum(r.env_steps for r in history),
                                        "seconds": round(time.perf_counter() - start, 1),
                                        "per_round": [r.as_dict() for r in history],
-                                       **({"harvest": {"labels": len(harvest.labels.actions),
-                                                       "episodes": harvest.episodes,
-                                                       "successes": harvest.successes}} if harvest else {})}
+                                       **({"harvest": {"labels": len(harvest.trails.labels.actions),
+                                                       "episodes": harvest.trails.episodes,
+                                                       "successes": harvest.trails.successes}} if harvest else {})}
         write_atomic(run_dir / "config.yaml", yaml.safe_dump(saved_config, sort_keys=False))
     return model, True
 
