@@ -47,8 +47,8 @@ def options_of(obj: Any, only: Optional[Iterable[str]] = None, skip: Iterable[st
         if p.kind in (p.VAR_KEYWORD, p.VAR_POSITIONAL) or p.name in skip or (only is not None and p.name not in only):
             continue
         kind = types.get(p.name, hints.get(p.name, str))
-        if only is None and kind not in (int, float, str, bool, Optional[str], Optional[int], Optional[float],
-                                           Optional[Path], Path):
+        if only is None and kind not in (int, float, str, bool, Optional[bool], Optional[str], Optional[int],
+                                           Optional[float], Optional[Path], Path):
             continue
         default = defaults.get(p.name, p.default)
         if default is inspect.Parameter.empty:

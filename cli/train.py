@@ -50,12 +50,22 @@ def _run_options() -> list:
     from sb3_disagree.run import RunConfig, train as run
 
     helps = {"steps": "Env steps to train (default 100000); with --resume, the run's new total (default: its saved "
-                      "one)", "priors": "auto (the two nearest the goal in the embedding), or the priors' goals: a,b"}
-    return [*options_of(RunConfig, skip=("acer_kwargs", "env_kwargs"), flags={"env_id": "--env"},
-                        types={"priors": str, "steps": Optional[int]}, helps=helps,
+                      "one)", "priors": "auto (the two nearest the goal in the embedding), or the priors' goals: a,b",
+             "consistency_harvest": "model.zip is fitted to the loop-free paths of the successful episodes of the "
+                                    "last this many training steps, no env step more (default: 30000 for --mode "
+                                    "kickstart, 0 (off) for the others)",
+             "consistency_harvest_average": "Over the harvest the new policy acts by the moving average of its "
+                                            "weights, what model.zip acts with (default: on with the default harvest)"}
+    return [*options_of(RunConfig, skip=("acer_kwargs", "env_kwargs"),
+                        types={"priors": str, "steps": Optional[int], "consistency_harvest": Optional[int],
+                               "consistency_harvest_average": Optional[bool]},
+                        flags={"env_id": "--env", "consistency_harvest_average":
+                               "--consistency-harvest-average/--no-consistency-harvest-average"}, helps=helps,
                         # dopt train overlaps the replay updates (faster on two cores); --no-overlap for the
-                        # sequential loop the experiments use.
-                        defaults={"overlap": True, "steps": None}),
+                        # sequential loop the experiments use. It fits model.zip to its own last episodes' loop-free
+                        # paths, acting by the average over them (DOPT_TRAIN_HARVEST); None: resolved in train.
+                        defaults={"overlap": True, "steps": None, "consistency_harvest": None,
+                                  "consistency_harvest_average": None}),
             *options_of(run, only=("out", "resume", "force"), types={"resume": Optional[Path], "out": Path}),
             *options_of(_cli_only)]
 
@@ -93,6 +103,7 @@ def train(**options) -> None:
         options["acer_kwargs"] = {k: v for k in ("reward_scale", "ema_decay") if (v := options.pop(k)) is not None}
         options["env_kwargs"] = {k: v for k in ("collision_penalty", "reward_distance") if (v := options.pop(k)) is not None}
         steps = options["steps"]
+        _default_harvest(options, resume)
         config = RunConfig(**{**options, "steps": steps or 100_000, "priors": _priors(options["priors"])})
         config.validate() if resume is None else check_resume(config, resume, force)
         display = _Display(every)
@@ -104,6 +115,20 @@ def train(**options) -> None:
             console.print(f"evaluating the new policy alone for its card ({card_episodes} episodes each way)")
         _show_evaluations(write_card(run_dir, model, card_episodes if finished else 0, command_line()))
         _show_end(run_dir, model, finished, config.goal)
+
+
+def _default_harvest(options: dict, resume: Optional[Path]) -> None:
+    """dopt train's harvest where none is given: ``DOPT_TRAIN_HARVEST``, acting by the average, for a new run of
+    the default mode (kickstarting, where it was measured); none for the other modes, and none asked of a resumed
+    run (it keeps its saved settings)."""
+    from sb3_disagree.run.config import DOPT_TRAIN_HARVEST
+
+    if options["consistency_harvest"] is None:
+        new_kickstart = resume is None and options["mode"] == "kickstart"
+        options["consistency_harvest"] = DOPT_TRAIN_HARVEST if new_kickstart else 0
+        if options["consistency_harvest_average"] is None:
+            options["consistency_harvest_average"] = bool(options["consistency_harvest"])
+    options["consistency_harvest_average"] = bool(options["consistency_harvest_average"])
 
 
 def _show_round(r) -> None:
@@ -167,7 +192,7 @@ def _show_end(run_dir: Path, model, finished: bool, goal: str) -> None:
             line += f" of training and {int(phase['env_steps']):,} of the greedy-consistency phase"
         if phase.get("harvest"):  # labels from the training's own last episodes
             line += (f" (model.zip fitted to the loop-free paths of the successful episodes of its last "
-                     f"{int(saved['consistency_harvest']):,} training steps)")
+                     f"{min(int(saved['consistency_harvest']), model.num_timesteps):,} training steps)")
         elif phase:
             line += " (model.zip is its policy)"
         console.print(line + f"; wrote {run_dir}")

@@ -41,6 +41,10 @@ def test_train_writes_the_run_folder(zoo, tmp_path, mode):
     assert list((run / "monitor").glob("*.monitor.csv")) and list(run.glob("events.out.tfevents*"))
     cfg = yaml.safe_load((run / "config.yaml").read_text())
     assert cfg["finished"] and cfg["num_timesteps"] >= 400
+    # dopt train's default harvest (all 400 steps here), acting by the average: kickstarting only
+    assert (cfg["consistency_harvest"], cfg["consistency_harvest_average"]) == (
+        (30_000, True) if mode == "kickstart" else (0, False))
+    assert ("harvest" in (cfg.get("consistency") or {})) == (mode == "kickstart")
     if mode == "finetune":  # started from the nearest prior: its policy head, a Q head of its own
         prior = ACER.load(zoo / "sb3_disagree__ApartmentState-v0" / "shower" / "model.zip")
         assert ACER.load(run / "model.zip").policy.net_arch == prior.policy.net_arch
@@ -57,6 +61,17 @@ def test_train_writes_the_run_folder(zoo, tmp_path, mode):
     model = algorithm_of(mode).load(run / "model.zip")
     env = make_vec_env(STATE_ID, n_envs=1, env_kwargs=dict(goal="bathtub"))
     evaluate_policy(model, env, n_eval_episodes=1)
+
+
+def test_the_default_harvest_gives_way_to_the_options_given(zoo, tmp_path):
+    result = runner.invoke(app, _train_args(zoo, tmp_path, "--mode", "kickstart", "--consistency-harvest", "200",
+                                            "--no-consistency-harvest-average", "--card-episodes", "0"))
+    assert result.exit_code == 0, result.output
+    assert "of its last 200 training steps" in result.output
+    cfg = yaml.safe_load((tmp_path / "sb3_disagree__ApartmentState-v0" / "bathtub" / "kickstart-0" / "config.yaml")
+                         .read_text())
+    assert (cfg["consistency_harvest"], cfg["consistency_harvest_average"]) == (200, False)
+    assert cfg["consistency"]["harvest"]["episodes"] >= 0
 
 
 def test_greedy_phase_takes_the_end_of_the_budget(zoo, tmp_path):
