@@ -24,10 +24,11 @@ ACER_KWARGS: dict[str, Any] = dict(n_steps=20, buffer_size=50_000, replay_start=
 # weights (0.999 per update); over five seeds at 100k the policy alone went from 0.16 to 0.68 greedy on bathtub
 # and 0.18 to 0.47 on nightstand, sampled 0.98 -> 0.99 and 0.98 -> 0.94 (docs/results.md).
 MODE_ACER_KWARGS: dict[str, dict[str, Any]] = {"kickstart": dict(reward_scale=1.0, ema_decay=0.999)}
-# dopt train's consistency_harvest (with consistency_harvest_average) for kickstarting, its default mode: over the last 30k training
-# steps the policy acts by its moving average, and model.zip is fitted to the loop-free paths of the successful
-# episodes (no env step more, 12-28 s of fitting). Over five seeds at 100k the policy alone went from 0.68 to 0.77
-# greedy on bathtub and from 0.47 to 0.61 on nightstand, sampled 0.99 -> 0.99 and 0.94 -> 0.95 (docs/results.md).
+# dopt train's consistency_harvest (with consistency_harvest_average) for kickstarting, its default mode: over the
+# last 30k training steps the policy acts by its moving average, and model.zip is fitted to the loop-free paths of
+# the successful episodes (no env step more, 12-28 s of fitting). Over five seeds at 100k the policy alone went from
+# 0.68 to 0.77 greedy on bathtub and from 0.47 to 0.61 on nightstand, sampled 0.99 -> 0.99 and 0.94 -> 0.95
+# (docs/results.md).
 DOPT_TRAIN_HARVEST = 30_000
 
 
