@@ -254,7 +254,7 @@ def plot(experiment: Experiment, grid: np.ndarray, summaries: list[CellSummary],
         _draw_path(ax, experiment, root / s.cell / f"seed-{s.seeds[0]}", s.cell)
     fig.tight_layout(rect=(0, legend_height / fig.get_figheight(), 1, 1))
     out.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(out, dpi=100)
+    fig.savefig(out, dpi=100, bbox_inches="tight")  # long cell names widen the legend beyond the axes
     plt.close(fig)
 
 
