@@ -9,7 +9,8 @@ import yaml
 from typer.testing import CliRunner
 
 from sb3_disagree.cli.app import app
-from sb3_disagree.experiments.report import CellSummary, ratio_markdown, seeds_markdown, summarize, table_markdown
+from sb3_disagree.experiments.report import (CellSummary, cell_colors, ratio_markdown, seeds_markdown, summarize,
+                                             table_markdown)
 from sb3_disagree.experiments.runner import run_experiment
 from sb3_disagree.experiments.spec import SHIPPED, load_experiment
 
@@ -418,3 +419,15 @@ def test_the_policy_alone_table_reads_greedy_and_sampled_at_each_evaluation():
     rows = alone_markdown([cell("finetune", [0.0, 0.5]), cell("old", [])]).splitlines()
     assert rows[0] == "| cell | 25k greedy / sampled | 50k greedy / sampled |"
     assert rows[2:] == ["| finetune | 0.00 / 0.20 | 0.50 / 0.90 |"]
+
+
+@pytest.mark.parametrize("n", [3, 10, 11, 20, 21, 33, 60])
+def test_every_cell_of_a_figure_has_its_own_colour(n):
+    # The full alone-bathtub figure has over 30 cells: a colormap indexed past its 20 colours gave the rest one colour.
+    colors = cell_colors(n)
+    assert len(colors) == n and len(set(colors)) == n
+
+
+def test_cell_colours_repeat_only_past_sixty():
+    colors = cell_colors(61)
+    assert len(set(colors)) == 60 and colors[60] == colors[0]

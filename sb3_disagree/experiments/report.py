@@ -58,6 +58,22 @@ class CellSummary:
     seed_curves: list[np.ndarray] = field(default_factory=list)  # each seed's training success on the grid
 
 
+def cell_colors(n: int) -> list[tuple[float, float, float]]:
+    """
+    One colour per cell: tab10 for up to 10 cells, else tab20, tab20b and tab20c one after the other (60
+    colours; a colormap indexed past its end repeats its last colour, which made the later cells of a large grid
+    look alike).
+
+    :param n: The number of cells
+    :return: ``n`` RGB colours, distinct for up to 60 cells (then repeating)
+    """
+    import matplotlib.pyplot as plt
+
+    palette = [c for name in (("tab10",) if n <= 10 else ("tab20", "tab20b", "tab20c"))
+               for c in plt.get_cmap(name).colors]
+    return [tuple(palette[i % len(palette)]) for i in range(n)]
+
+
 def alone_curve(folders: list[Path], key: str = "successes") -> tuple[np.ndarray, np.ndarray]:
     """The periodic evaluations of the new policy alone (``evaluations.npz``), averaged over runs at common
     steps: sampled actions (``successes``) or greedy ones (``successes_greedy``, where the runs measured it)."""
@@ -218,21 +234,21 @@ def plot(experiment: Experiment, grid: np.ndarray, summaries: list[CellSummary],
     half = grid_spec.ncols // 2
     ax1, ax2 = fig.add_subplot(grid_spec[0, :half]), fig.add_subplot(grid_spec[0, half:])
     path_axes = [fig.add_subplot(grid_spec[1, 2 * j:2 * j + 2]) for j in range(n_paths)]
-    colors = plt.get_cmap("tab10" if len(summaries) <= 10 else "tab20")  # one colour per cell, however many
+    colors = cell_colors(len(summaries))
     for i, s in enumerate(summaries):
         # With two seeds the t-interval (t = 12.7) spans the whole axis and hides the curves: no band then.
         banded = len(s.seeds) >= MIN_SEEDS_FOR_BAND
         label = f"{s.cell} ({len(s.seeds)} seed{'s' if len(s.seeds) > 1 else ''}{'' if banded or len(s.seeds) == 1 else ', no band'})"
-        ax1.plot(grid, s.mean, color=colors(i), label=label)
+        ax1.plot(grid, s.mean, color=colors[i], label=label)
         if banded:
-            ax1.fill_between(grid, np.clip(s.low, 0, 1), np.clip(s.high, 0, 1), color=colors(i), alpha=0.2)
+            ax1.fill_between(grid, np.clip(s.low, 0, 1), np.clip(s.high, 0, 1), color=colors[i], alpha=0.2)
         if len(s.alone_steps):
-            ax1.plot(s.alone_steps, s.alone_mean, "--o", color=colors(i), markersize=3, linewidth=1)
+            ax1.plot(s.alone_steps, s.alone_mean, "--o", color=colors[i], markersize=3, linewidth=1)
         if len(s.alone_greedy):
-            ax1.plot(s.alone_steps[:len(s.alone_greedy)], s.alone_greedy, ":s", color=colors(i), markersize=3,
+            ax1.plot(s.alone_steps[:len(s.alone_greedy)], s.alone_greedy, ":s", color=colors[i], markersize=3,
                      linewidth=1)
         if not np.all(np.isnan(s.usage)):
-            ax2.plot(grid, s.usage, color=colors(i), label=s.cell)
+            ax2.plot(grid, s.usage, color=colors[i], label=s.cell)
     priors = experiment.priors if isinstance(experiment.priors, str) else " + ".join(experiment.priors)
     ax1.set(xlabel="env steps", ylabel="training success rate (last 50 episodes)", ylim=(-0.02, 1.02),
             title=f"{experiment.name}: {experiment.goal}, priors {priors}")
