@@ -48,12 +48,13 @@ class LiveDisplay(BaseCallback):
 
 def _run_options() -> list:
     from sb3_disagree.run import RunConfig, train as run
+    from sb3_disagree.run.config import DOPT_TRAIN_HARVEST
 
     helps = {"steps": "Env steps to train (default 100000); with --resume, the run's new total (default: its saved "
                       "one)", "priors": "auto (the two nearest the goal in the embedding), or the priors' goals: a,b",
              "consistency_harvest": "model.zip is fitted to the loop-free paths of the successful episodes of the "
-                                    "last this many training steps, no env step more (default: 30000 for --mode "
-                                    "kickstart, 0 (off) for the others)",
+                                    f"last this many training steps, no env step more (default: {DOPT_TRAIN_HARVEST} for "
+                                    "--mode kickstart, 0 (off) for the others)",
              "consistency_harvest_average": "Over the harvest the new policy acts by the moving average of its "
                                             "weights, what model.zip acts with (default: on with the default harvest)"}
     return [*options_of(RunConfig, skip=("acer_kwargs", "env_kwargs"),
