@@ -197,3 +197,55 @@ def test_linked_frames_rebuild_the_stacks_push_frames_built():
     idx = rng.permutation(len(held))[:40]
     np.testing.assert_array_equal(held[idx], expected[idx])
     assert (expected[:n, : (k - 1) * 2] == 0).all() and len(held) == steps * n
+
+
+def test_loop_flags_say_which_older_frames_the_newest_equals():
+    from gymnasium import spaces
+
+    from sb3_disagree.acer.torch_layers import LoopFlagsCNN
+
+    space = spaces.Box(0, 255, (9, 40, 40), dtype=np.uint8)  # 3 frames of 3 channels
+    extractor = LoopFlagsCNN(space, frame_stack=3, features_dim=16)
+    assert extractor.features_dim == 16 + 2
+    a, b = np.full((3, 40, 40), 0.2), np.full((3, 40, 40), 0.4)
+    c = b.copy()
+    c[1, 5, 7] += 1 / 255  # one pixel one level apart: a different pose
+    cases = [  # (oldest, middle, newest) -> (newest == middle, newest == oldest)
+        ((a, b, b), [1, 0]),  # pressed against a wall
+        ((b, a, b), [0, 1]),  # turned back
+        ((b, b, b), [1, 1]),
+        ((a, b, c), [0, 0]),
+        ((np.zeros_like(a), np.zeros_like(a), a), [0, 0]),  # before the episode's start: zeros, no frame
+    ]
+    for frames, expected in cases:
+        stack = th.as_tensor(np.concatenate(frames)[None], dtype=th.float32)
+        assert extractor.flags(stack).tolist() == [expected], expected
+        # The CNN sees the newest frame only: the older ones reach the features through the flags alone.
+        features = extractor(stack)
+        alone = extractor.cnn(th.as_tensor(frames[-1][None], dtype=th.float32))
+        assert th.allclose(features[:, :16], alone) and features[0, 16:].tolist() == expected
+    with pytest.raises(ValueError, match="frame_stack must be >= 2"):
+        LoopFlagsCNN(spaces.Box(0, 255, (3, 40, 40), dtype=np.uint8), frame_stack=1)
+    with pytest.raises(ValueError, match="not a stack of 2 frames"):
+        LoopFlagsCNN(space, frame_stack=2)
+
+
+def test_a_loop_flags_policy_round_trips_through_save_load_and_evaluate_policy(tmp_path):
+    from sb3_disagree.acer.torch_layers import LoopFlagsCNN
+
+    env = make_vec_env(ImageEnv, n_envs=2, seed=0)
+    kwargs = dict(frame_stack=2, features_extractor_class=LoopFlagsCNN, features_extractor_kwargs=dict(frame_stack=2))
+    model = ACER("CnnPolicy", env, n_steps=3, replay_start=6, seed=0, policy_kwargs=kwargs)
+    model.learn(30)
+    model.save(tmp_path / "m.zip")
+    loaded = ACER.load(tmp_path / "m.zip")
+    assert isinstance(loaded.policy.net.features_extractor, LoopFlagsCNN) and loaded.policy.frame_stack == 2
+    obs = np.stack([ImageEnv()._obs(), np.full((40, 40, 3), 180, np.uint8)])
+    state = None
+    for start in (True, False, False):  # the same frames again: the flags turn on through the carried stack
+        expected, state_a = model.predict(obs, state=state, episode_start=np.full(2, start), deterministic=True)
+        got, state = loaded.predict(obs, state=state, episode_start=np.full(2, start), deterministic=True)
+        assert np.array_equal(expected, got) and np.array_equal(state_a[0], state[0])
+    flags = loaded.policy.net.features_extractor.flags(th.as_tensor(state[0], dtype=th.float32) / 255)
+    assert flags.tolist() == [[1.0], [1.0]]
+    evaluate_policy(loaded, env, n_eval_episodes=4)

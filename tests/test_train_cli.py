@@ -251,6 +251,8 @@ def test_resumed_run_appends_to_its_history(zoo, tmp_path):
     (["--ema-decay", "0.9", "--mode", "ppo"], "--ema-decay: settings of ACER; --mode ppo trains SB3's PPO"),
     (["--collision-penalty", "-1"], "--collision-penalty must be a number >= 0"),
     (["--reward-distance", "manhattan"], "--reward-distance must be euclidean or geodesic"),
+    (["--loop-flags"], "--loop-flags compares the newest frame with older ones: give --frame-stack 2"),
+    (["--loop-flags", "--frame-stack", "2"], "--loop-flags compares frames: the env's observations must be images"),
 ])
 def test_bad_input_is_a_message_and_exit_code_2(zoo, tmp_path, extra, message):
     result = runner.invoke(app, _train_args(zoo, tmp_path, *extra))

@@ -73,6 +73,9 @@ class RunConfig:
         dopt train
     :param frame_stack: The new policy sees its last this many observations (its memory; 1: the current one);
         each prior keeps the input it was trained on (its own stack if it has memory, else the observation)
+    :param loop_flags: The new policy's CNN sees the newest frame only, and the older frames of its stack give it
+        flags instead: whether the newest frame equals each of them (pressed against a wall, turning back and forth;
+        ``LoopFlagsCNN``). Needs ``frame_stack`` >= 2 and image observations
     :param jsrl_horizon: Mode "jsrl": the guide's horizon at the start, in steps; 0 for the priors' mean
         episode length on their zoo cards
     :param init: "scratch" (a fresh network) or "prior" (the most similar prior's architecture and weights, as
@@ -115,6 +118,7 @@ class RunConfig:
     vec_env: str = "dummy"
     overlap: bool = False
     frame_stack: int = 1
+    loop_flags: bool = False
     jsrl_horizon: int = 0
     checkpoint_every: int = 25_000
     init: str = "scratch"
@@ -163,6 +167,8 @@ class RunConfig:
             raise ValueError(f"--frame-stack must be >= 1, got {self.frame_stack}")
         if self.frame_stack > 1 and self.mode == "ppo":
             raise ValueError("--frame-stack is an ACER policy's memory; --mode ppo trains SB3's PPO without it")
+        if self.loop_flags and self.frame_stack < 2:
+            raise ValueError("--loop-flags compares the newest frame with older ones: give --frame-stack 2 or more")
         if not 0 <= self.greedy_phase <= self.steps or not 0 < self.greedy_epsilon <= 1:
             raise ValueError("--greedy-phase must be between 0 and --steps and --greedy-epsilon in (0, 1], got "
                              f"{self.greedy_phase} and {self.greedy_epsilon}")
