@@ -249,3 +249,27 @@ def test_a_loop_flags_policy_round_trips_through_save_load_and_evaluate_policy(t
     flags = loaded.policy.net.features_extractor.flags(th.as_tensor(state[0], dtype=th.float32) / 255)
     assert flags.tolist() == [[1.0], [1.0]]
     evaluate_policy(loaded, env, n_eval_episodes=4)
+
+
+def test_loop_flags_on_raw_frames_match_sb3s_preprocessing_bit_for_bit():
+    from stable_baselines3.common.preprocessing import preprocess_obs
+
+    from sb3_disagree.acer.torch_layers import LoopFlagsCNN
+
+    model = ACER("CnnPolicy", make_vec_env(ImageEnv, n_envs=1), policy_kwargs=dict(
+        frame_stack=3, features_extractor_class=LoopFlagsCNN, features_extractor_kwargs=dict(frame_stack=3)))
+    policy, rng = model.policy, np.random.default_rng(0)
+    frames = rng.integers(0, 256, (4, 3, 40, 40), dtype=np.uint8)
+    one_off = frames[0].copy()
+    one_off[2, 3, 4] ^= 1
+    stacks = th.as_tensor(np.stack([np.concatenate(f) for f in [
+        (frames[0], frames[1], frames[1]), (frames[1], frames[0], frames[1]), (frames[2], frames[3], frames[0]),
+        (frames[0], one_off, frames[0]), (np.zeros_like(frames[0]), np.zeros_like(frames[0]), frames[0])]]))
+    extractor = policy.net.features_extractor
+    raw = policy.extract_features(stacks, extractor)  # the stack as stored, scaled inside
+    scaled = extractor(preprocess_obs(stacks, policy.observation_space))  # SB3's way: the whole stack scaled first
+    assert th.equal(raw, scaled)
+    assert raw[:, -2:].tolist() == [[1, 0], [0, 1], [0, 0], [0, 1], [0, 0]]
+    # Frames whose byte count 8 does not divide are compared byte by byte: the same flags.
+    small = stacks[:, :, :5, :5].contiguous()
+    assert extractor.flags(small).tolist() == [[1, 0], [0, 1], [0, 0], [0, 1], [0, 0]]

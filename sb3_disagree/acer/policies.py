@@ -180,6 +180,14 @@ class ACERPolicy(BasePolicy):
         )
         return data
 
+    def extract_features(self, obs: PyTorchObs, features_extractor: BaseFeaturesExtractor) -> th.Tensor:
+        """SB3's preprocessing then the extractor, except for an extractor that scales what it uses itself
+        (``takes_raw_images``, as ``LoopFlagsCNN``: scaling a whole stack would cost more than its CNN's input)."""
+        if getattr(features_extractor, "takes_raw_images", False) and self.normalize_images and isinstance(
+                obs, th.Tensor) and obs.dtype == th.uint8:
+            return features_extractor(obs)
+        return super().extract_features(obs, features_extractor)
+
     def logits_and_q(self, obs: PyTorchObs) -> tuple[th.Tensor, th.Tensor]:
         """
         :param obs: Observations, as tensors
