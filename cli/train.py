@@ -48,7 +48,7 @@ class LiveDisplay(BaseCallback):
 
 def _run_options() -> list:
     from sb3_disagree.run import RunConfig, train as run
-    from sb3_disagree.run.config import DOPT_TRAIN_HARVEST
+    from sb3_disagree.run.config import DOPT_TRAIN_FRAME_STACK, DOPT_TRAIN_HARVEST
 
     helps = {"steps": "Env steps to train (default 100000); with --resume, the run's new total (default: its saved "
                       "one)", "priors": "auto (the two nearest the goal in the embedding), or the priors' goals: a,b",
@@ -56,17 +56,25 @@ def _run_options() -> list:
                                     f"last this many training steps, no env step more (default: {DOPT_TRAIN_HARVEST} for "
                                     "--mode kickstart, 0 (off) for the others)",
              "consistency_harvest_average": "Over the harvest the new policy acts by the moving average of its "
-                                            "weights, what model.zip acts with (default: on with the default harvest)"}
+                                            "weights, what model.zip acts with (default: on with the default harvest)",
+             "frame_stack": "The new policy sees its last this many observations (its memory; default: "
+                            f"{DOPT_TRAIN_FRAME_STACK} with --loop-flags, else 1)",
+             "loop_flags": "The new policy's CNN sees the newest frame, and flags say whether it equals each older "
+                           "frame of the stack: pressed against a wall, turning back and forth (default: on for "
+                           "--mode kickstart on image observations)"}
     return [*options_of(RunConfig, skip=("acer_kwargs", "env_kwargs"),
                         types={"priors": str, "steps": Optional[int], "consistency_harvest": Optional[int],
-                               "consistency_harvest_average": Optional[bool]},
+                               "consistency_harvest_average": Optional[bool], "frame_stack": Optional[int],
+                               "loop_flags": Optional[bool]},
                         flags={"env_id": "--env", "consistency_harvest_average":
-                               "--consistency-harvest-average/--no-consistency-harvest-average"}, helps=helps,
+                               "--consistency-harvest-average/--no-consistency-harvest-average",
+                               "loop_flags": "--loop-flags/--no-loop-flags"}, helps=helps,
                         # dopt train overlaps the replay updates (faster on two cores); --no-overlap for the
                         # sequential loop the experiments use. It fits model.zip to its own last episodes' loop-free
                         # paths, acting by the average over them (DOPT_TRAIN_HARVEST); None: resolved in train.
+                        # Its new kickstarting runs see three frames, with loop flags (DOPT_TRAIN_FRAME_STACK).
                         defaults={"overlap": True, "steps": None, "consistency_harvest": None,
-                                  "consistency_harvest_average": None}),
+                                  "consistency_harvest_average": None, "frame_stack": None, "loop_flags": None}),
             *options_of(run, only=("out", "resume", "force"), types={"resume": Optional[Path], "out": Path}),
             *options_of(_cli_only)]
 
@@ -105,6 +113,7 @@ def train(**options) -> None:
         options["env_kwargs"] = {k: v for k in ("collision_penalty", "reward_distance") if (v := options.pop(k)) is not None}
         steps = options["steps"]
         _default_harvest(options, resume)
+        _default_memory(options, resume)
         config = RunConfig(**{**options, "steps": steps or 100_000, "priors": _priors(options["priors"])})
         config.validate() if resume is None else check_resume(config, resume, force)
         display = _Display(every)
@@ -130,6 +139,21 @@ def _default_harvest(options: dict, resume: Optional[Path]) -> None:
         if options["consistency_harvest_average"] is None:
             options["consistency_harvest_average"] = bool(options["consistency_harvest"])
     options["consistency_harvest_average"] = bool(options["consistency_harvest_average"])
+
+
+def _default_memory(options: dict, resume: Optional[Path]) -> None:
+    """dopt train's memory where none is given: ``DOPT_TRAIN_FRAME_STACK`` frames with loop flags for a new run of
+    the default mode (kickstarting, where they were measured) on image observations; one frame otherwise, and a
+    resumed run keeps its saved memory."""
+    from sb3_disagree.run.config import DOPT_TRAIN_FRAME_STACK, image_observations
+
+    stack, flags = options["frame_stack"], options["loop_flags"]
+    if flags is None:
+        flags = (stack is None and resume is None and options["mode"] == "kickstart"
+                 and image_observations(options["env_id"]))
+    if stack is None:
+        stack = DOPT_TRAIN_FRAME_STACK if flags else 1
+    options["frame_stack"], options["loop_flags"] = stack, bool(flags)
 
 
 def _show_round(r) -> None:

@@ -45,6 +45,7 @@ def test_train_writes_the_run_folder(zoo, tmp_path, mode):
     assert (cfg["consistency_harvest"], cfg["consistency_harvest_average"]) == (
         (30_000, True) if mode == "kickstart" else (0, False))
     assert ("harvest" in (cfg.get("consistency") or {})) == (mode == "kickstart")
+    assert (cfg["frame_stack"], cfg["loop_flags"]) == (1, False)  # state observations: no frames to compare
     if mode == "finetune":  # started from the nearest prior: its policy head, a Q head of its own
         prior = ACER.load(zoo / "sb3_disagree__ApartmentState-v0" / "shower" / "model.zip")
         assert ACER.load(run / "model.zip").policy.net_arch == prior.policy.net_arch
@@ -72,6 +73,24 @@ def test_the_default_harvest_gives_way_to_the_options_given(zoo, tmp_path):
                          .read_text())
     assert (cfg["consistency_harvest"], cfg["consistency_harvest_average"]) == (200, False)
     assert cfg["consistency"]["harvest"]["episodes"] >= 0
+
+
+@pytest.mark.parametrize("given,env,mode,resume,expected", [
+    ({}, "sb3_disagree/Apartment-v0", "kickstart", None, (3, True)),  # dopt train's default memory
+    ({}, STATE_ID, "kickstart", None, (1, False)),  # no frames to compare
+    ({}, "sb3_disagree/Apartment-v0", "disagreement", None, (1, False)),  # not measured there
+    ({}, "sb3_disagree/Apartment-v0", "kickstart", "RUN", (1, False)),  # a resumed run keeps its saved memory
+    ({"frame_stack": 4}, "sb3_disagree/Apartment-v0", "kickstart", None, (4, False)),  # a plain stack asked for
+    ({"loop_flags": False}, "sb3_disagree/Apartment-v0", "kickstart", None, (1, False)),
+    ({"loop_flags": True}, "sb3_disagree/Apartment-v0", "disagreement", None, (3, True)),
+    ({"frame_stack": 2, "loop_flags": True}, STATE_ID, "kickstart", None, (2, True)),  # validation refuses it later
+])
+def test_the_default_memory_gives_way_to_the_options_given(given, env, mode, resume, expected):
+    from sb3_disagree.cli.train import _default_memory
+
+    options = {"frame_stack": None, "loop_flags": None, "env_id": env, "mode": mode, **given}
+    _default_memory(options, resume)
+    assert (options["frame_stack"], options["loop_flags"]) == expected
 
 
 def test_greedy_phase_takes_the_end_of_the_budget(zoo, tmp_path):
@@ -251,7 +270,7 @@ def test_resumed_run_appends_to_its_history(zoo, tmp_path):
     (["--ema-decay", "0.9", "--mode", "ppo"], "--ema-decay: settings of ACER; --mode ppo trains SB3's PPO"),
     (["--collision-penalty", "-1"], "--collision-penalty must be a number >= 0"),
     (["--reward-distance", "manhattan"], "--reward-distance must be euclidean or geodesic"),
-    (["--loop-flags"], "--loop-flags compares the newest frame with older ones: give --frame-stack 2"),
+    (["--loop-flags", "--frame-stack", "1"], "--loop-flags compares the newest frame with older ones: give --frame-stack 2"),
     (["--loop-flags", "--frame-stack", "2"], "--loop-flags compares frames: the env's observations must be images"),
 ])
 def test_bad_input_is_a_message_and_exit_code_2(zoo, tmp_path, extra, message):

@@ -30,6 +30,10 @@ MODE_ACER_KWARGS: dict[str, dict[str, Any]] = {"kickstart": dict(reward_scale=1.
 # 0.68 to 0.77 greedy on bathtub and from 0.47 to 0.61 on nightstand, sampled 0.99 -> 0.99 and 0.94 -> 0.95
 # (docs/results.md).
 DOPT_TRAIN_HARVEST = 30_000
+# dopt train's memory for a new kickstarting run on images: three frames, seen as the newest frame and two loop flags
+# (LoopFlagsCNN). With the harvest, at 100k, the policy alone stands greedily where it did not without them
+# (docs/results.md, "Loop flags").
+DOPT_TRAIN_FRAME_STACK = 3
 
 
 def acer_defaults(mode: str) -> dict[str, Any]:
@@ -71,11 +75,13 @@ class RunConfig:
     :param overlap: ACER's replay updates in a second thread while the next segment is collected (faster on two
         cores). Off in the library and the experiments (the sequential loop their figures were made with); on in
         dopt train
-    :param frame_stack: The new policy sees its last this many observations (its memory; 1: the current one);
+    :param frame_stack: The new policy sees its last this many observations (its memory; 1: the current one; dopt
+        train: ``DOPT_TRAIN_FRAME_STACK`` with loop flags for a new kickstarting run on images);
         each prior keeps the input it was trained on (its own stack if it has memory, else the observation)
     :param loop_flags: The new policy's CNN sees the newest frame only, and the older frames of its stack give it
         flags instead: whether the newest frame equals each of them (pressed against a wall, turning back and forth;
-        ``LoopFlagsCNN``). Needs ``frame_stack`` >= 2 and image observations
+        ``LoopFlagsCNN``). Needs ``frame_stack`` >= 2 and image observations (dopt train: on, with ``DOPT_TRAIN_FRAME_STACK`` frames, for
+        a new kickstarting run on images)
     :param jsrl_horizon: Mode "jsrl": the guide's horizon at the start, in steps; 0 for the priors' mean
         episode length on their zoo cards
     :param init: "scratch" (a fresh network) or "prior" (the most similar prior's architecture and weights, as
@@ -223,6 +229,16 @@ class RunConfig:
 
     def run_dir(self, out: Path) -> Path:
         return out / self.env_id.replace("/", "__") / self.goal / f"{self.mode}-{self.seed}"
+
+
+def image_observations(env_id: str) -> bool:
+    """Whether the registered env ``env_id`` observes images (False for an unknown id: validation says so)."""
+    import gymnasium as gym
+
+    try:
+        return gym.spec(env_id).kwargs.get("obs") == "rgb"
+    except gym.error.Error:
+        return False
 
 
 def check_navigation_env(env_id: str) -> None:
