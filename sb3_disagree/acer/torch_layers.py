@@ -45,12 +45,12 @@ class LoopFlagsCNN(BaseFeaturesExtractor):
         :param observations: Stacks, shape (batch, k * c, ...), newest frame last
         :return: Shape (batch, k - 1): column j - 1 is 1.0 where the newest frame equals the one j steps back
         """
+        raw = observations.dtype == th.uint8
         frames = observations.reshape(len(observations), self.k, -1)  # (batch, k, pixels), oldest first
+        if raw and frames.shape[2] % 8 == 0:  # no scaled copy of the stack, 8 bytes a comparison
+            frames = frames.view(th.int64)
         newest, older = frames[:, -1:], frames[:, :-1].flip(1)  # older[:, j - 1]: the frame j steps back
-        if observations.dtype == th.uint8:  # no scaled copy of the stack; 8 bytes a comparison where they divide
-            if frames.shape[2] % 8 == 0:
-                frames = frames.view(th.int64)
-                newest, older = frames[:, -1:], frames[:, :-1].flip(1)
+        if raw:
             return (older == newest).all(2).float()
         # Frames are exact renders: equal poses give equal pixels, any move changes some by >= 1/255.
         return ((older - newest).abs().amax(2) < 1e-4).float()

@@ -175,6 +175,8 @@ class RunConfig:
             raise ValueError("--frame-stack is an ACER policy's memory; --mode ppo trains SB3's PPO without it")
         if self.loop_flags and self.frame_stack < 2:
             raise ValueError("--loop-flags compares the newest frame with older ones: give --frame-stack 2 or more")
+        if self.loop_flags and not image_observations(self.env_id):
+            raise ValueError("--loop-flags compares frames: the env's observations must be images")
         if not 0 <= self.greedy_phase <= self.steps or not 0 < self.greedy_epsilon <= 1:
             raise ValueError("--greedy-phase must be between 0 and --steps and --greedy-epsilon in (0, 1], got "
                              f"{self.greedy_phase} and {self.greedy_epsilon}")

@@ -37,9 +37,7 @@ def new_model(config: RunConfig, env, behaviour, priors: Optional[PriorSet]):
         policy_kwargs.update(transfer_kwargs(priors.priors[0].policy))
     if config.frame_stack > 1:
         policy_kwargs["frame_stack"] = config.frame_stack
-    if config.loop_flags:
-        if policy != "CnnPolicy":
-            raise ValueError("--loop-flags compares frames: the env's observations must be images")
+    if config.loop_flags:  # validate() has checked the observations are images
         policy_kwargs.update(features_extractor_class=LoopFlagsCNN,
                              features_extractor_kwargs=dict(frame_stack=config.frame_stack))
     model = ACER(policy, env, seed=config.seed, behaviour=behaviour, overlap=config.overlap,
