@@ -280,3 +280,40 @@ def test_harvest_from_the_average_acts_by_the_weights_model_zip_acts_with():
     assert all(np.allclose(probs, current) for _, probs, current, _ in early)
     assert any(not np.allclose(current, average, atol=1e-3) for _, _, current, average in late)  # they differ
     assert not model.act_with_average  # only during the harvest
+
+
+class _RecordWeights(BaseCallback):
+    """At each rollout's start: the env steps so far and a copy of the policy's weights."""
+
+    def _on_training_start(self) -> None:
+        self.rows = []
+
+    def _on_rollout_start(self) -> None:
+        weights = th.nn.utils.parameters_to_vector(self.model.policy.parameters()).detach().clone()
+        self.rows.append((self.num_timesteps, weights))
+
+    def _on_step(self) -> bool:
+        return True
+
+
+@pytest.mark.parametrize("overlap", [False, True])
+def test_a_frozen_harvest_collects_without_updates(overlap):
+    env = make_vec_env(TurnEnv, n_envs=4, seed=3)
+    model = ACER("MlpPolicy", env, seed=0, n_steps=10, replay_start=40, learning_rate=0.01, overlap=overlap,
+                 policy_kwargs=dict(net_arch=[32]))
+    harvest, record = HarvestLabels(start=800, frozen=True), _RecordWeights()
+    model.learn(1400, callback=[harvest, record])
+    final = th.nn.utils.parameters_to_vector(model.policy.parameters()).detach()
+    before = [w for steps, w in record.rows if steps < 800]
+    # The segment that crosses the start (800-840) is collected frozen; what was earned before it (with overlap,
+    # replay updates still pending) is learned at its end, and the weights are fixed from the next one on.
+    after = [w for steps, w in record.rows if steps >= 840]
+    assert len(after) >= 10 and all(th.equal(w, final) for w in after)
+    assert not th.equal(before[-2], before[-1])  # they did learn before the harvest
+    assert harvest.trails.episodes > 0 and not model.updates_frozen  # it collected; frozen only during the harvest
+
+
+def test_dopt_train_frozen_harvest_needs_a_harvest(tmp_path):
+    result = runner.invoke(app, ["train", "--goal", "bathtub", "--env", "sb3_disagree/ApartmentState-v0", "--mode",
+                                 "scratch", "--steps", "600", "--consistency-harvest-frozen", "--out", str(tmp_path)])
+    assert result.exit_code == 2 and "--consistency-harvest-frozen" in result.output and not list(tmp_path.iterdir())

@@ -187,6 +187,8 @@ class ACER(BaseAlgorithm):
         # Set by a harvest of the training's own episodes (consistency.HarvestLabels): the behaviour's own branch
         # samples from the weights model.zip acts with (the moving average), whose paths the harvest fits.
         self.act_with_average = False
+        # Set by a frozen harvest (consistency.HarvestLabels): segments are still collected, but not learned from.
+        self.updates_frozen = False
         if _init_setup_model:
             self._setup_model()
 
@@ -215,7 +217,7 @@ class ACER(BaseAlgorithm):
 
     def _excluded_save_params(self) -> list[str]:
         return [*super()._excluded_save_params(), "behaviour", "_last_infos", "_last_stack", "_ent_coef_schedule",
-                "last_rollout_tags", "act_with_average"]
+                "last_rollout_tags", "act_with_average", "updates_frozen"]
 
     def _get_torch_save_params(self) -> tuple[list[str], list[str]]:
         return ["policy", "policy.optimizer"], []
@@ -431,12 +433,14 @@ class ACER(BaseAlgorithm):
             return self.distill_coef
         return self.distill_coef * max(0.0, 1.0 - self.num_timesteps / self.distill_steps)
 
-    def train(self, segment: Segment) -> None:
+    def train(self, segment: Optional[Segment]) -> None:
         """
         Store the segment, update on it, then on ``Poisson(replay_ratio)`` segments from the replay buffer.
 
-        :param segment: The segment just collected
+        :param segment: The segment just collected (None: nothing to learn, nothing pending to settle)
         """
+        if segment is None:
+            return
         self._update_learning_rate(self.policy.optimizer)
         stats = self._on_policy_update(segment, self.policy)
         n_replay = self._replay(self.policy, self._replay_count(None))
@@ -498,6 +502,7 @@ class ACER(BaseAlgorithm):
         callback.on_training_start(locals(), globals())
         assert self.env is not None
 
+        settled = False
         with self._segment_trainer() as train_on:
             while self.num_timesteps < total_timesteps:
                 segment = self.collect_rollouts(self.env, callback)
@@ -507,16 +512,21 @@ class ACER(BaseAlgorithm):
                 self._update_current_progress_remaining(self.num_timesteps, total_timesteps)
                 self.behaviour_policy.record(self.logger)
                 self._record_tags()
-                train_on(segment)
+                if not self.updates_frozen:
+                    train_on(segment)
+                    settled = False
+                elif not settled:  # the first frozen segment: what was earned before is learned, once
+                    train_on(None)
+                    settled = True
                 if log_interval is not None and iteration % log_interval == 0:
                     self.dump_logs(iteration)
 
         callback.on_training_end()
         return self
 
-    def _segment_trainer(self) -> contextlib.AbstractContextManager[Callable[[Segment], None]]:
+    def _segment_trainer(self) -> contextlib.AbstractContextManager[Callable[[Optional[Segment]], None]]:
         """What learns from each collected segment: :meth:`train`, or with ``overlap`` the overlapped trainer
-        (:func:`sb3_disagree.acer.overlap.overlapped_updates`)."""
+        (:func:`sb3_disagree.acer.overlap.overlapped_updates`); called with None, it settles what is pending."""
         return overlapped_updates(self) if self.overlap else contextlib.nullcontext(self.train)
 
     def _record_tags(self) -> None:

@@ -224,11 +224,13 @@ class HarvestLabels(BaseCallback):
     :param start: The env step after which steps are kept (the budget minus the harvest)
     :param from_average: Over the harvest, the behaviour samples from the weights the model acts with (its moving
         average, where one is kept) instead of the current ones (ACER's ``mu`` is still the distribution acted by)
+    :param frozen: Over the harvest, ACER makes no update: the paths come from one fixed policy, the one the fit
+        starts from, and the harvest's env steps cost no update
     """
 
-    def __init__(self, start: int, from_average: bool = False) -> None:
+    def __init__(self, start: int, from_average: bool = False, frozen: bool = False) -> None:
         super().__init__()
-        self.start, self.from_average = start, from_average
+        self.start, self.from_average, self.frozen = start, from_average, frozen
         self.trails = _Trails(0)  # what was kept: labels, episodes, successes
 
     def _init_callback(self) -> None:
@@ -238,6 +240,7 @@ class HarvestLabels(BaseCallback):
         if self.num_timesteps <= self.start:  # num_timesteps counts this step already
             return True
         self.model.act_with_average = self.from_average
+        self.model.updates_frozen = self.frozen
         # ACER's collect_rollouts: the net's input of this step, and the observation (its newest frame) before it
         net_inputs, obs = self.locals["observations"][self.locals["step"]], self.model._last_obs
         for i, action in enumerate(self.locals["actions"]):
@@ -247,4 +250,4 @@ class HarvestLabels(BaseCallback):
         return True
 
     def _on_training_end(self) -> None:
-        self.model.act_with_average = False
+        self.model.act_with_average = self.model.updates_frozen = False

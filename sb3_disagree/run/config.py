@@ -103,6 +103,8 @@ class RunConfig:
     :param consistency_harvest_average: Over the harvest the new policy acts by the moving average of its weights
         (what model.zip acts with, ``ema_decay``) instead of the current ones (dopt train: on with its default
         harvest)
+    :param consistency_harvest_frozen: Over the harvest ACER makes no update: its paths come from the one policy
+        the fit starts from, and its env steps cost no update
     """
 
     goal: str
@@ -135,6 +137,7 @@ class RunConfig:
     consistency_steps: int = 20_000
     consistency_harvest: int = 0
     consistency_harvest_average: bool = False
+    consistency_harvest_frozen: bool = False
 
     def __post_init__(self) -> None:
         if isinstance(self.acer_kwargs, dict) and isinstance(self.mode, str):  # anything else: validate() says so
@@ -189,6 +192,9 @@ class RunConfig:
             raise ValueError(f"--consistency-harvest must be >= 0, got {self.consistency_harvest}")
         if self.consistency_harvest_average and not self.consistency_harvest:
             raise ValueError("--consistency-harvest-average acts by the average over a harvest: give "
+                             "--consistency-harvest too")
+        if self.consistency_harvest_frozen and not self.consistency_harvest:
+            raise ValueError("--consistency-harvest-frozen stops the updates over a harvest: give "
                              "--consistency-harvest too")
         if (self.consistency_rounds or self.consistency_harvest) and self.mode == "ppo":
             flag = "--consistency-rounds" if self.consistency_rounds else "--consistency-harvest"

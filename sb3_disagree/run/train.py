@@ -128,7 +128,8 @@ def train(config: RunConfig, out: Path = Path("runs"), resume: Optional[Path] = 
         own.append(Checkpoint(run_dir, config.checkpoint_every))
     harvest = None
     if config.consistency_harvest:  # a resumed run keeps what it trains from here on
-        harvest = HarvestLabels(config.steps - config.consistency_harvest, config.consistency_harvest_average)
+        harvest = HarvestLabels(config.steps - config.consistency_harvest, config.consistency_harvest_average,
+                                config.consistency_harvest_frozen)
         own.append(harvest)
     finished = True
     try:
