@@ -98,13 +98,18 @@ def _zoo_table(entries: list, goal: Optional[str], sims: dict[str, float], chose
                    ((card.evaluation_greedy, card.evaluation) if card else ({}, {}))]
         row = [e.goal, *([e.env_id] if len(envs) > 1 else []), card.sb3_class.rsplit(".", 1)[-1] if card else "?",
                str(card.training.get("method", "?")) if card else "?", str(card.training.get("steps", "?")) if card else "?",
-               str(card.training.get("frame_stack", 1)) if card else "?",  # the prior's memory, in observations
+               _memory(card.training) if card else "?",
                *(f"{v:.2f}" if v is not None else "-" for v in success)]
         if goal:
             row += [f"{sims[e.goal]:.3f}" if e.goal in sims else "(goal)", "[bold green]chosen[/]" if e.goal in chosen else ""]
         row.append("[green]ok[/]" if not e.problem else f"[red]{e.problem}[/]")
         table.add_row(*row)
     return table
+
+
+def _memory(training: dict) -> str:
+    """The prior's memory, in observations ("3+flags" for loop flags over a stack of three)."""
+    return str(training.get("frame_stack", 1)) + ("+flags" if training.get("loop_flags") else "")
 
 
 @app.command()
@@ -181,8 +186,8 @@ def _make_options() -> list:
     return [*options_of(make_prior, only=("goal", "method", "env_id", "steps", "n_envs", "seed", "episodes", "replace"),
                         flags={"env_id": "--env"}, defaults={"env_id": DEFAULT_ENV}),
             *options_of(train_dagger, only=("rounds", "steps_per_round", "epochs", "final_epochs",
-                                            "validation_episodes", "learner_actions", "frame_stack"),
-                        helps={k: "DAgger: " + v for k, v in param_help(train_dagger).items()}),
+                                            "validation_episodes", "learner_actions", "frame_stack", "loop_flags"),
+                        flags={"loop_flags": "--loop-flags/--no-loop-flags"}, helps={k: "DAgger: " + v for k, v in param_help(train_dagger).items()}),
             *options_of(list_priors, only=("zoo",))]
 
 
@@ -195,7 +200,8 @@ def train(**options) -> None:
 
         goal, method, zoo = options.pop("goal"), options.pop("method"), options.pop("zoo")
         dagger = {k: options.pop(k) for k in ("rounds", "steps_per_round", "epochs", "final_epochs",
-                                              "validation_episodes", "learner_actions", "frame_stack")}
+                                              "validation_episodes", "learner_actions", "frame_stack",
+                                              "loop_flags")}
         with _progress() as progress:
             task = progress.add_task(f"{method} {goal}", total=dagger["rounds"] if method == "dagger" else 1)
             entry, evaluations = make_prior(_zoo(zoo), goal, method=method, command=command_line(),

@@ -228,3 +228,39 @@ def test_dagger_with_memory_fits_the_stacks_the_learner_saw(monkeypatch):
     obs = env.reset()
     actions, state = model.predict(obs, state=None, episode_start=np.ones(n, dtype=bool), deterministic=True)
     assert actions.shape == (n,) and state[0].shape == (n, 3 * d)
+
+
+def test_cli_train_dagger_with_loop_flags(tmp_path):
+    """An RGB prior with loop flags: its CNN sees the newest frame and two flags, its card and list say so, and it
+    acts in the method's loop with its own stack."""
+    import numpy as np
+    import torch as th
+
+    from sb3_disagree.acer.torch_layers import LoopFlagsCNN
+    from sb3_disagree.options.priors import PriorSet
+
+    base = ["priors", "train", "--goal", "toilet", "--zoo", str(tmp_path), "--rounds", "2", "--steps-per-round", "40",
+            "--epochs", "1", "--episodes", "2"]
+    for bad in (["--loop-flags"], ["--loop-flags", "--frame-stack", "3", "--env", STATE_ID]):
+        result = runner.invoke(app, [*base, *bad])
+        assert result.exit_code == 2 and "loop flags" in result.output and not list(tmp_path.iterdir())
+    result = runner.invoke(app, [*base, "--frame-stack", "3", "--loop-flags"])
+    assert result.exit_code == 0, result.output
+    entry = Zoo(tmp_path).get("toilet", "sb3_disagree/Apartment-v0")
+    assert entry.card.training["loop_flags"] and entry.card.training["frame_stack"] == 3
+    listed = runner.invoke(app, ["priors", "list", "--zoo", str(tmp_path)], env={"COLUMNS": "200"}).output
+    row = next(line for line in listed.splitlines() if "toilet" in line)
+    assert [c.strip() for c in row.split("│")][5] == "3+flags"
+    prior = Zoo(tmp_path).load(entry, device="cpu")
+    extractor = prior.policy.net.features_extractor
+    assert isinstance(extractor, LoopFlagsCNN) and extractor.features_dim == 128 + 2 and prior.policy.frame_stack == 3
+    priors = PriorSet([prior, prior])
+    obs = np.random.default_rng(0).integers(0, 256, (2, 60, 80, 3), dtype=np.uint8)
+    priors.probs(obs)
+    probs = priors.probs(obs, episode_starts=np.zeros(2, dtype=bool))  # the same frame again: pressed to a wall
+    frame = prior.policy.obs_to_tensor(obs)[0].numpy()  # channels first
+    stack = th.as_tensor(np.concatenate([np.zeros_like(frame), frame, frame], axis=1))
+    with th.no_grad():
+        expected = prior.policy.get_distribution(stack).distribution.probs
+        assert th.equal(extractor.flags(stack), th.tensor([[1.0, 0.0]] * 2))
+    assert probs.shape == (2, 2, 3) and th.allclose(probs[0], expected) and th.allclose(probs[1], expected)

@@ -18,6 +18,7 @@ from stable_baselines3.common.vec_env import VecEnv
 
 from sb3_disagree.acer import ACER
 from sb3_disagree.acer.memory import LinkedFrames, push_frames
+from sb3_disagree.acer.torch_layers import LoopFlagsCNN
 from sb3_disagree.defaults import PRIOR_VALIDATION_SEED
 from sb3_disagree.envs.vec import make_vec
 from sb3_disagree.evaluation import Evaluation, evaluate
@@ -46,6 +47,7 @@ def train_dagger(
     validation_seed: int = PRIOR_VALIDATION_SEED,
     learner_actions: str = "sampled",
     frame_stack: int = 1,
+    loop_flags: bool = False,
     progress: Optional[Callable[[str], None]] = None,
 ) -> tuple[ACER, dict[str, Any]]:
     """
@@ -73,6 +75,9 @@ def train_dagger(
         wall) are visited and labelled; validation then evaluates greedily too
     :param frame_stack: Number of recent observations the policy sees (its memory, carried by ``predict``'s
         ``state``); the labels are fitted on the stacks the learner saw
+    :param loop_flags: The policy's CNN sees the newest frame, and flags say whether it equals each older frame of
+        the stack (``LoopFlagsCNN``: pressed against a wall, turning back and forth); needs ``frame_stack`` >= 2
+        and image observations
     :param progress: Called with a line of text after each round
     :return: An ACER model whose policy imitates the expert, and a record of the training
     """
@@ -80,7 +85,15 @@ def train_dagger(
         raise ValueError(f"learner_actions must be 'sampled' or 'greedy', got {learner_actions!r}")
     greedy = learner_actions == "greedy"
     name = policy_name(env)
-    model = ACER(name, env, seed=seed, policy_kwargs=dict(PRIOR_POLICY_KWARGS[name], frame_stack=frame_stack))
+    policy_kwargs = dict(PRIOR_POLICY_KWARGS[name], frame_stack=frame_stack)
+    if loop_flags:
+        if frame_stack < 2 or name != "CnnPolicy":
+            raise ValueError("loop flags compare the newest frame with older ones: they need --frame-stack >= 2 and "
+                             f"image observations, got {frame_stack} frame(s) of {env.observation_space}")
+        policy_kwargs.update(features_extractor_class=LoopFlagsCNN,
+                             features_extractor_kwargs=dict(policy_kwargs["features_extractor_kwargs"],
+                                                            frame_stack=frame_stack))
+    model = ACER(name, env, seed=seed, policy_kwargs=policy_kwargs)
     env = model.get_env()  # as the policy sees it (channel-first images)
     policy = model.policy
     optimizer = th.optim.Adam(policy.net.parameters(), lr=learning_rate)
@@ -136,7 +149,8 @@ def train_dagger(
         if progress:
             progress(line)
     record = {"method": "dagger", "steps": int(len(y)), "seed": seed, "rounds": rounds, "epochs": epochs,
-              "final_epochs": final_epochs, "learner_actions": learner_actions, "frame_stack": frame_stack}
+              "final_epochs": final_epochs, "learner_actions": learner_actions, "frame_stack": frame_stack,
+              "loop_flags": loop_flags}
     if validation:
         selected = int(np.flatnonzero(np.asarray(validation) == max(validation))[-1])
         policy.net.load_state_dict(best)
