@@ -31,8 +31,8 @@ MODE_ACER_KWARGS: dict[str, dict[str, Any]] = {"kickstart": dict(reward_scale=1.
 # (docs/results.md).
 DOPT_TRAIN_HARVEST = 30_000
 # dopt train's memory for a new kickstarting run on images: three frames, seen as the newest frame and two loop flags
-# (LoopFlagsCNN). Over 5 and 4 seeds at 100k, with the harvest, the policy alone went from 0.77
-# to 0.93 greedy on bathtub and from 0.61 to 0.85 on nightstand, sampled 1.00 and 0.98 (docs/results.md, "Loop flags").
+# (LoopFlagsCNN). Over five seeds a task at 100k, with the harvest, the policy alone went from 0.77
+# to 0.93 greedy on bathtub and from 0.61 to 0.86 on nightstand, sampled 1.00 and 0.99 (docs/results.md, "Loop flags").
 DOPT_TRAIN_FRAME_STACK = 3
 
 
