@@ -236,9 +236,10 @@ def test_dopt_train_fits_model_zip_to_the_harvest_of_its_own_episodes(tmp_path):
     base = ["train", "--goal", "bathtub", "--env", "sb3_disagree/ApartmentState-v0", "--mode", "scratch", "--steps",
             "600", "--n-envs", "2", "--card-episodes", "0", "--out", str(tmp_path)]
     for bad in (["--consistency-harvest", "-1"],
-                ["--mode", "ppo", "--consistency-harvest", "100"], ["--consistency-harvest-average"]):
+                ["--mode", "ppo", "--consistency-harvest", "100"], ["--consistency-harvest-average"],
+                ["--consistency-harvest", "100", "--consistency-epochs", "0"]):
         result = runner.invoke(app, [*base, *bad])
-        assert result.exit_code == 2 and "--consistency-harvest" in result.output and not list(tmp_path.iterdir())
+        assert result.exit_code == 2 and "--consistency-" in result.output and not list(tmp_path.iterdir())
     result = runner.invoke(app, [*base, "--consistency-harvest", "900"])  # more than the budget: all of it
     assert result.exit_code == 0, result.output
     assert "greedy consistency, the training's last episodes" in result.output
@@ -317,3 +318,19 @@ def test_dopt_train_frozen_harvest_needs_a_harvest(tmp_path):
     result = runner.invoke(app, ["train", "--goal", "bathtub", "--env", "sb3_disagree/ApartmentState-v0", "--mode",
                                  "scratch", "--steps", "600", "--consistency-harvest-frozen", "--out", str(tmp_path)])
     assert result.exit_code == 2 and "--consistency-harvest-frozen" in result.output and not list(tmp_path.iterdir())
+
+
+def test_dopt_train_fits_the_harvest_for_the_epochs_asked(tmp_path, monkeypatch):
+    import importlib
+
+    run_train = importlib.import_module("sb3_disagree.run.train")  # the module (the package exports its train())
+    calls, phase = [], run_train.greedy_consistency
+    monkeypatch.setattr(run_train, "greedy_consistency",
+                        lambda model, env, rounds, steps, epochs, **kw: calls.append(epochs) or phase(model, env, rounds,
+                                                                                                     steps, epochs, **kw))
+    result = runner.invoke(app, ["train", "--goal", "bathtub", "--env", "sb3_disagree/ApartmentState-v0", "--mode",
+                                 "scratch", "--steps", "400", "--n-envs", "2", "--card-episodes", "0", "--out",
+                                 str(tmp_path), "--consistency-harvest", "400", "--consistency-epochs", "2"])
+    assert result.exit_code == 0, result.output
+    (run_dir,) = tmp_path.glob("*/bathtub/scratch-0")
+    assert yaml.safe_load((run_dir / "config.yaml").read_text())["consistency_epochs"] == 2 and calls == [2]

@@ -105,6 +105,7 @@ class RunConfig:
         harvest)
     :param consistency_harvest_frozen: Over the harvest ACER makes no update: its paths come from the one policy
         the fit starts from, and its env steps cost no update
+    :param consistency_epochs: Passes over the labels in each fit of the phase (and in the harvest's fit)
     """
 
     goal: str
@@ -138,6 +139,7 @@ class RunConfig:
     consistency_harvest: int = 0
     consistency_harvest_average: bool = False
     consistency_harvest_frozen: bool = False
+    consistency_epochs: int = 3
 
     def __post_init__(self) -> None:
         if isinstance(self.acer_kwargs, dict) and isinstance(self.mode, str):  # anything else: validate() says so
@@ -188,6 +190,8 @@ class RunConfig:
         if self.consistency_rounds < 0 or (self.consistency_rounds and self.consistency_steps < 4):
             raise ValueError("--consistency-rounds must be >= 0 and --consistency-steps >= 4 (one per env), got "
                              f"{self.consistency_rounds} and {self.consistency_steps}")
+        if self.consistency_epochs < 1:
+            raise ValueError(f"--consistency-epochs must be >= 1, got {self.consistency_epochs}")
         if self.consistency_harvest < 0:
             raise ValueError(f"--consistency-harvest must be >= 0, got {self.consistency_harvest}")
         if self.consistency_harvest_average and not self.consistency_harvest:

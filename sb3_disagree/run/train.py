@@ -166,7 +166,8 @@ def _refine(config: RunConfig, run_dir: Path, model: ACER, saved_config: dict,
     try:
         with sigterm_as_interrupt():
             history = greedy_consistency(model, env, config.consistency_rounds, config.consistency_steps,
-                                         seed=config.seed, on_round=on_round, harvest=harvest)
+                                         config.consistency_epochs, seed=config.seed, on_round=on_round,
+                                         harvest=harvest)
     except KeyboardInterrupt:  # the weights are half fitted: hand back the trained policy that model.zip holds
         return _load(config, run_dir / "model.zip", run_dir), False
     finally:
