@@ -159,7 +159,7 @@ def test_dopt_consistency_writes_beside_the_run_and_never_over_it(tmp_path):
 
 def test_dopt_train_refines_model_zip_when_asked_and_resume_keeps_it(tmp_path, monkeypatch):
     # The phase's learning is tested above; here what dopt train does with it, on a phase that shifts the logits.
-    def shifting_phase(model, env, rounds, steps, seed=0, on_round=None, harvest=None):
+    def shifting_phase(model, env, rounds, steps, epochs=3, seed=0, on_round=None, harvest=None):
         with th.no_grad():
             for p in model.policy.acting_net.parameters():
                 p.add_(0.1)
@@ -201,7 +201,7 @@ def test_an_interrupted_phase_leaves_the_trained_model_and_resume_redoes_it(tmp_
     module = sys.modules["sb3_disagree.run.train"]
     calls = []
 
-    def interrupted(model, env, rounds, steps, seed=0, on_round=None, harvest=None):
+    def interrupted(model, env, rounds, steps, epochs=3, seed=0, on_round=None, harvest=None):
         calls.append("interrupted")
         raise KeyboardInterrupt
 
@@ -216,7 +216,7 @@ def test_an_interrupted_phase_leaves_the_trained_model_and_resume_redoes_it(tmp_
     (checkpoint,) = (run_dir / "checkpoints").iterdir()
     assert (checkpoint / "model.zip").read_bytes() == (run_dir / "model.zip").read_bytes()  # the trained policy
 
-    def phase(model, env, rounds, steps, seed=0, on_round=None, harvest=None):
+    def phase(model, env, rounds, steps, epochs=3, seed=0, on_round=None, harvest=None):
         calls.append("done")
         return [RoundStats(steps, 1, 1, 1, 0.0, 1.0)]
 
