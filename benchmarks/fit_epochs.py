@@ -5,7 +5,7 @@ the model acts with, ``collect_escapes(sampling="always")``, on the run's own co
 same start weights to the same labels for each number of epochs and evaluate each result alone with SB3's
 ``evaluate_policy``, greedy and sampled, from one env seed the runs never trained on.
 
-    python benchmarks/fit_epochs.py RUN [RUN ...] [--steps 30000] [--epochs 3,8] [--episodes 100] [--seed 777] \
+    python benchmarks/fit_epochs.py RUN [RUN ...] [--steps 30000] [--epochs 3,6] [--episodes 100] [--seed 777] \
         [--out rows.jsonl]
 """
 
@@ -30,7 +30,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("runs", nargs="+", type=Path)
     parser.add_argument("--steps", type=int, default=30_000, help="env steps of the collection (the harvest's)")
-    parser.add_argument("--epochs", default="3,8", help="the fits to compare, comma-separated")
+    parser.add_argument("--epochs", default="3,6", help="the fits to compare, comma-separated")
     parser.add_argument("--episodes", type=int, default=100)
     parser.add_argument("--seed", type=int, default=777, help="env seed of the evaluations")
     parser.add_argument("--threads", type=int, default=1)
@@ -45,8 +45,11 @@ def main() -> None:
         start = time.perf_counter()
         labels, counts = collect_escapes(model, env, args.steps, np.random.default_rng(config["seed"]), "always")
         env.close()
-        inputs, actions = np.stack(labels.inputs), np.asarray(labels.actions, dtype=np.int64)
         collected = time.perf_counter() - start
+        if not labels.actions:  # no episode reached the goal: nothing to fit
+            print(json.dumps({"run": str(run), "goal": config["goal"], "labels": 0, **counts}), flush=True)
+            continue
+        inputs, actions = np.stack(labels.inputs), np.asarray(labels.actions, dtype=np.int64)
         trained = copy.deepcopy(model.policy.acting_net.state_dict())
         for epochs in [int(e) for e in args.epochs.split(",")]:
             model.policy.acting_net.load_state_dict(trained)

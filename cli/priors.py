@@ -187,7 +187,8 @@ def _make_options() -> list:
                         flags={"env_id": "--env"}, defaults={"env_id": DEFAULT_ENV}),
             *options_of(train_dagger, only=("rounds", "steps_per_round", "epochs", "final_epochs",
                                             "validation_episodes", "learner_actions", "frame_stack", "loop_flags"),
-                        flags={"loop_flags": "--loop-flags/--no-loop-flags"}, helps={k: "DAgger: " + v for k, v in param_help(train_dagger).items()}),
+                        flags={"loop_flags": "--loop-flags/--no-loop-flags"},
+                        helps={k: "DAgger: " + v for k, v in param_help(train_dagger).items()}),
             *options_of(list_priors, only=("zoo",))]
 
 

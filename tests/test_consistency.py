@@ -325,9 +325,12 @@ def test_dopt_train_fits_the_harvest_for_the_epochs_asked(tmp_path, monkeypatch)
 
     run_train = importlib.import_module("sb3_disagree.run.train")  # the module (the package exports its train())
     calls, phase = [], run_train.greedy_consistency
-    monkeypatch.setattr(run_train, "greedy_consistency",
-                        lambda model, env, rounds, steps, epochs, **kw: calls.append(epochs) or phase(model, env, rounds,
-                                                                                                     steps, epochs, **kw))
+
+    def recorded(model, env, rounds, steps, epochs, **kwargs):
+        calls.append(epochs)
+        return phase(model, env, rounds, steps, epochs, **kwargs)
+
+    monkeypatch.setattr(run_train, "greedy_consistency", recorded)
     result = runner.invoke(app, ["train", "--goal", "bathtub", "--env", "sb3_disagree/ApartmentState-v0", "--mode",
                                  "scratch", "--steps", "400", "--n-envs", "2", "--card-episodes", "0", "--out",
                                  str(tmp_path), "--consistency-harvest", "400", "--consistency-epochs", "2"])

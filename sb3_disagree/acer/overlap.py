@@ -33,8 +33,8 @@ def overlapped_updates(model: Any) -> Iterator[Callable[[Optional[Segment]], Non
     A function that learns from each collected segment: it does the on-policy update on a learner copy of
     the policy, copies the learner into ``model.policy`` (which the rollouts act with) and hands the segment's
     replay updates to a second thread. Called with None, it settles instead: the pending and carried replay
-    updates are made and copied into ``model.policy``, which then holds all that was learned. Leaving the context (also on an interruption) waits for the last
-    replay updates: what was collected is learned.
+    updates are made and copied into ``model.policy``, which then holds all that was learned. Leaving the context
+    (also on an interruption) waits for the last replay updates: what was collected is learned.
 
     :param model: The ACER model whose ``learn`` collects the segments (not imported here: ACER imports this)
     """

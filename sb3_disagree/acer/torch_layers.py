@@ -1,5 +1,7 @@
 """Features extractors of ACER's policies beyond SB3's own."""
 
+from typing import Any
+
 import torch as th
 from gymnasium import spaces
 from stable_baselines3.common.torch_layers import BaseFeaturesExtractor, NatureCNN
@@ -60,3 +62,14 @@ class LoopFlagsCNN(BaseFeaturesExtractor):
         if newest.dtype == th.uint8:
             newest = newest.float() / 255.0
         return th.cat([self.cnn(newest), self.flags(observations)], dim=1)
+
+
+def loop_flags_kwargs(frame_stack: int, **extractor_kwargs: Any) -> dict[str, Any]:
+    """
+    The ``policy_kwargs`` that make a policy's features extractor :class:`LoopFlagsCNN` over ``frame_stack`` frames.
+
+    :param frame_stack: The frames of the policy's stack (its ``frame_stack`` policy kwarg too)
+    :param extractor_kwargs: LoopFlagsCNN's other settings (``features_dim``, ...)
+    """
+    return dict(features_extractor_class=LoopFlagsCNN,
+                features_extractor_kwargs=dict(extractor_kwargs, frame_stack=frame_stack))

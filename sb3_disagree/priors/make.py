@@ -18,7 +18,7 @@ from stable_baselines3.common.vec_env import VecEnv
 
 from sb3_disagree.acer import ACER
 from sb3_disagree.acer.memory import LinkedFrames, push_frames
-from sb3_disagree.acer.torch_layers import LoopFlagsCNN
+from sb3_disagree.acer.torch_layers import loop_flags_kwargs
 from sb3_disagree.defaults import PRIOR_VALIDATION_SEED
 from sb3_disagree.envs.vec import make_vec
 from sb3_disagree.evaluation import Evaluation, evaluate
@@ -90,9 +90,7 @@ def train_dagger(
         if frame_stack < 2 or name != "CnnPolicy":
             raise ValueError("loop flags compare the newest frame with older ones: they need --frame-stack >= 2 and "
                              f"image observations, got {frame_stack} frame(s) of {env.observation_space}")
-        policy_kwargs.update(features_extractor_class=LoopFlagsCNN,
-                             features_extractor_kwargs=dict(policy_kwargs["features_extractor_kwargs"],
-                                                            frame_stack=frame_stack))
+        policy_kwargs.update(loop_flags_kwargs(frame_stack, **policy_kwargs["features_extractor_kwargs"]))
     model = ACER(name, env, seed=seed, policy_kwargs=policy_kwargs)
     env = model.get_env()  # as the policy sees it (channel-first images)
     policy = model.policy

@@ -80,8 +80,8 @@ class RunConfig:
         each prior keeps the input it was trained on (its own stack if it has memory, else the observation)
     :param loop_flags: The new policy's CNN sees the newest frame only, and the older frames of its stack give it
         flags instead: whether the newest frame equals each of them (pressed against a wall, turning back and forth;
-        ``LoopFlagsCNN``). Needs ``frame_stack`` >= 2 and image observations (dopt train: on, with ``DOPT_TRAIN_FRAME_STACK`` frames, for
-        a new kickstarting run on images)
+        ``LoopFlagsCNN``). Needs ``frame_stack`` >= 2 and image observations (dopt train: on, with
+        ``DOPT_TRAIN_FRAME_STACK`` frames, for a new kickstarting run on images)
     :param jsrl_horizon: Mode "jsrl": the guide's horizon at the start, in steps; 0 for the priors' mean
         episode length on their zoo cards
     :param init: "scratch" (a fresh network) or "prior" (the most similar prior's architecture and weights, as

@@ -3,7 +3,7 @@
 from typing import Optional
 
 from sb3_disagree.acer import ACER
-from sb3_disagree.acer.torch_layers import LoopFlagsCNN
+from sb3_disagree.acer.torch_layers import loop_flags_kwargs
 from sb3_disagree.acer.transfer import load_prior_weights, transfer_kwargs
 from sb3_disagree.options import PriorSet
 from sb3_disagree.run.config import KICKSTART, PPO_KWARGS, RunConfig
@@ -38,8 +38,7 @@ def new_model(config: RunConfig, env, behaviour, priors: Optional[PriorSet]):
     if config.frame_stack > 1:
         policy_kwargs["frame_stack"] = config.frame_stack
     if config.loop_flags:  # validate() has checked the observations are images
-        policy_kwargs.update(features_extractor_class=LoopFlagsCNN,
-                             features_extractor_kwargs=dict(frame_stack=config.frame_stack))
+        policy_kwargs.update(loop_flags_kwargs(config.frame_stack))
     model = ACER(policy, env, seed=config.seed, behaviour=behaviour, overlap=config.overlap,
                  policy_kwargs=policy_kwargs, **acer_kwargs)
     if from_prior:
