@@ -24,6 +24,7 @@ from stable_baselines3.common.callbacks import BaseCallback, CallbackList
 from sb3_disagree.acer import ACER
 from sb3_disagree.behaviour import GreedyPhase, OnPolicyBehaviour
 from sb3_disagree.acer.consistency import HarvestLabels, RoundStats, greedy_consistency
+from sb3_disagree.allocator import keep_freed_memory
 from sb3_disagree.checkpoints import (Checkpoint, latest_checkpoint, replace_model, save_checkpoint,
                                       sigterm_as_interrupt, truncate_logs)
 from sb3_disagree.files import write_atomic
@@ -59,6 +60,7 @@ def train(config: RunConfig, out: Path = Path("runs"), resume: Optional[Path] = 
         (``config.consistency_rounds``), which follows a finished training; ``model.zip`` is then its policy
     :return: The run folder, the model, and whether training (and the phase) finished (False when interrupted)
     """
+    keep_freed_memory()  # about 10% more env steps/s: no page faults for each step's few-MB blocks
     checkpoint, saved = None, {}
     if resume is not None:
         run_dir = Path(resume)

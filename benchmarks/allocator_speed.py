@@ -1,0 +1,78 @@
+"""
+The C allocator's part in `dopt train`'s speed: the default run (kickstarting, overlapped, three frames with loop
+flags, priors shower and toilet) in fresh processes, with glibc's default settings and with
+``sb3_disagree.allocator.keep_freed_memory`` (what ``train`` applies), taking turns so that the machine's slow
+spells fall on both; env steps/s after a warm-up and the process's minor page faults. Written into
+docs/benchmarks.md.
+
+    python benchmarks/allocator_speed.py [--steps 12000] [--warm 2400] [--repeats 2] [--write]
+"""
+
+import argparse
+import json
+import os
+import platform
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+from docs_section import write_section
+
+# One timed run in a fresh process (the allocator's settings hold for a whole process).
+CHILD = """
+import importlib, json, resource, sys
+from pathlib import Path
+from tempfile import TemporaryDirectory
+sys.path.insert(0, {bench!r})
+from train_speed import Rate
+if {variant!r} == "glibc defaults":
+    importlib.import_module("sb3_disagree.run.train").keep_freed_memory = lambda: False
+from sb3_disagree.run import RunConfig, train
+with TemporaryDirectory() as tmp:
+    rate = Rate({warm})
+    config = RunConfig(goal="bathtub", mode="kickstart", priors=["shower", "toilet"], steps={warm} + {steps},
+                       overlap=True, frame_stack=3, loop_flags=True)
+    train(config, Path(tmp), callbacks=[rate])
+print(json.dumps({{"rate": rate.rate(), "minflt": resource.getrusage(resource.RUSAGE_SELF).ru_minflt}}))
+"""
+VARIANTS = ("glibc defaults", "keep_freed_memory")
+
+
+def timed(variant: str, steps: int, warm: int) -> dict:
+    code = CHILD.format(bench=str(Path(__file__).parent), variant=variant, warm=warm, steps=steps)
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    return json.loads(out.stdout.strip().splitlines()[-1])
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--steps", type=int, default=12_000)
+    parser.add_argument("--warm", type=int, default=2_400, help="steps before timing (ACER's replay starts at 2k)")
+    parser.add_argument("--repeats", type=int, default=2)
+    parser.add_argument("--write", action="store_true")
+    args = parser.parse_args()
+    rows: dict[str, list[dict]] = {v: [] for v in VARIANTS}
+    for i in range(args.repeats):
+        for variant in VARIANTS if i % 2 == 0 else VARIANTS[::-1]:
+            rows[variant].append(timed(variant, args.steps, args.warm))
+            print(variant, rows[variant][-1], flush=True)
+
+    def cell(values: list[float], fmt: str) -> str:
+        return f"{np.median(values):{fmt}} ({min(values):{fmt}}-{max(values):{fmt}})"
+
+    table = "\n".join(f"| {v} | {cell([r['rate'] for r in rows[v]], '.0f')} | "
+                      f"{cell([r['minflt'] / 1e6 for r in rows[v]], '.2f')} |" for v in VARIANTS)
+    body = (f"Command: `python benchmarks/allocator_speed.py --steps {args.steps} --warm {args.warm} --repeats "
+            f"{args.repeats}`; {platform.machine()}, {os.cpu_count()} cores, one run at a time; median (min-max) of "
+            f"{args.repeats} runs per row, the rows taking turns, each in a fresh process. `dopt train --goal bathtub`'s "
+            f"default run (kickstarting, `--overlap`, three frames with loop flags), env steps/s over {args.steps} "
+            f"steps after a {args.warm}-step warm-up, and the process's minor page faults (millions, set-up "
+            "included).\n\n| allocator | env steps/s | minor page faults (M) |\n|---|---|---|\n" + table + "\n")
+    if args.write:
+        write_section("allocator-speed", "The allocator", body)
+    print(body)
+
+
+if __name__ == "__main__":
+    main()
