@@ -3,9 +3,10 @@ The C allocator's part in `dopt train`'s speed: the default run (kickstarting, o
 flags, priors shower and toilet) in fresh processes, with glibc's default settings and with
 ``sb3_disagree.allocator.keep_freed_memory`` (what ``train`` applies), taking turns so that the machine's slow
 spells fall on both; env steps/s after a warm-up and the process's minor page faults. Written into
-docs/benchmarks.md.
+docs/benchmarks.md. ``--set teacher`` compares instead the kickstarting teacher computed once per rollout
+(``PriorTeacher``'s default) with the teacher computed at each step, both with the allocator's settings.
 
-    python benchmarks/allocator_speed.py [--steps 12000] [--warm 2400] [--repeats 2] [--write]
+    python benchmarks/allocator_speed.py [--set allocator|teacher] [--steps 12000] [--warm 2400] [--repeats 2] [--write]
 """
 
 import argparse
@@ -28,6 +29,8 @@ sys.path.insert(0, {bench!r})
 from train_speed import Rate
 if {variant!r} == "glibc defaults":
     importlib.import_module("sb3_disagree.run.train").keep_freed_memory = lambda: False
+if {variant!r} == "teacher at each step":
+    importlib.import_module("sb3_disagree.options.teacher").PriorTeacher.__init__.__defaults__ = (False,)
 from sb3_disagree.run import RunConfig, train
 with TemporaryDirectory() as tmp:
     rate = Rate({warm})
@@ -36,7 +39,8 @@ with TemporaryDirectory() as tmp:
     train(config, Path(tmp), callbacks=[rate])
 print(json.dumps({{"rate": rate.rate(), "minflt": resource.getrusage(resource.RUSAGE_SELF).ru_minflt}}))
 """
-VARIANTS = ("glibc defaults", "keep_freed_memory")
+SETS = {"allocator": ("glibc defaults", "keep_freed_memory"),
+        "teacher": ("teacher at each step", "teacher once per rollout")}
 
 
 def timed(variant: str, steps: int, warm: int) -> dict:
@@ -50,11 +54,13 @@ def main() -> None:
     parser.add_argument("--steps", type=int, default=12_000)
     parser.add_argument("--warm", type=int, default=2_400, help="steps before timing (ACER's replay starts at 2k)")
     parser.add_argument("--repeats", type=int, default=2)
+    parser.add_argument("--set", choices=sorted(SETS), default="allocator")
     parser.add_argument("--write", action="store_true")
     args = parser.parse_args()
-    rows: dict[str, list[dict]] = {v: [] for v in VARIANTS}
+    variants = SETS[args.set]
+    rows: dict[str, list[dict]] = {v: [] for v in variants}
     for i in range(args.repeats):
-        for variant in VARIANTS if i % 2 == 0 else VARIANTS[::-1]:
+        for variant in variants if i % 2 == 0 else variants[::-1]:
             rows[variant].append(timed(variant, args.steps, args.warm))
             print(variant, rows[variant][-1], flush=True)
 
@@ -62,15 +68,16 @@ def main() -> None:
         return f"{np.median(values):{fmt}} ({min(values):{fmt}}-{max(values):{fmt}})"
 
     table = "\n".join(f"| {v} | {cell([r['rate'] for r in rows[v]], '.0f')} | "
-                      f"{cell([r['minflt'] / 1e6 for r in rows[v]], '.2f')} |" for v in VARIANTS)
-    body = (f"Command: `python benchmarks/allocator_speed.py --steps {args.steps} --warm {args.warm} --repeats "
+                      f"{cell([r['minflt'] / 1e6 for r in rows[v]], '.2f')} |" for v in variants)
+    body = (f"Command: `python benchmarks/allocator_speed.py --set {args.set} --steps {args.steps} --warm {args.warm} --repeats "
             f"{args.repeats}`; {platform.machine()}, {os.cpu_count()} cores, one run at a time; median (min-max) of "
             f"{args.repeats} runs per row, the rows taking turns, each in a fresh process. `dopt train --goal bathtub`'s "
             f"default run (kickstarting, `--overlap`, three frames with loop flags), env steps/s over {args.steps} "
             f"steps after a {args.warm}-step warm-up, and the process's minor page faults (millions, set-up "
-            "included).\n\n| allocator | env steps/s | minor page faults (M) |\n|---|---|---|\n" + table + "\n")
+            "included).\n\n| " + args.set + " | env steps/s | minor page faults (M) |\n|---|---|---|\n" + table + "\n")
     if args.write:
-        write_section("allocator-speed", "The allocator", body)
+        write_section(f"{args.set}-speed", {"allocator": "The allocator", "teacher": "The teacher once per rollout"}[args.set],
+                      body)
     print(body)
 
 

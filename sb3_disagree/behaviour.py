@@ -71,6 +71,19 @@ class BehaviourPolicy(ABC):
         :param logger: The algorithm's logger
         """
 
+    def rollout_start(self) -> None:
+        """Called by the algorithm before the first step of each rollout."""
+
+    def rollout_teacher(self) -> Optional[np.ndarray]:
+        """
+        The teachers of the rollout's steps, for a behaviour that computes them once per rollout instead of with
+        each step (``BehaviourStep.teacher``); called by the algorithm after the rollout's last step.
+
+        :return: One row per step of the rollout, shape (steps, n_envs, n_actions), zeros where a step has no
+            teacher; None where the steps carried their own
+        """
+        return None
+
 
 class OnPolicyBehaviour(BehaviourPolicy):
     """Sample from the current policy: ``mu = pi``. The default, which makes ACER plain ACER."""
@@ -123,6 +136,12 @@ class GreedyPhase(BehaviourPolicy):
         self._greedy.append(1.0)
         return BehaviourStep(actions, mu, np.full(len(probs), "greedy"), teacher=step.teacher,
                              followed=None if step.followed is None else np.zeros(len(probs), np.float32))
+
+    def rollout_start(self) -> None:
+        self.inner.rollout_start()
+
+    def rollout_teacher(self) -> Optional[np.ndarray]:
+        return self.inner.rollout_teacher()
 
     def record(self, logger: "Logger") -> None:
         share = float(np.mean(self._greedy)) if self._greedy else 0.0

@@ -172,6 +172,12 @@ def test_a_prior_with_memory_gets_its_own_stack_as_its_predict_would_build_it():
         want = stacked.policy.get_distribution(th.as_tensor(state[0])).distribution.probs
         assert th.allclose(got[0], want)
         assert th.allclose(got[1], single.policy.get_distribution(th.as_tensor(obs)).distribution.probs)
+    # All five steps at once (a rollout's teachers): the same distributions, the stacks left where they were.
+    at_once = PriorSet([stacked, single])
+    fresh = PriorSet([stacked, single])
+    per_step = th.stack([fresh.probs(obs, start) for obs, start in zip(frames, starts)], dim=1)
+    assert th.allclose(at_once.probs_sequence(frames, starts), per_step, atol=1e-6)
+    np.testing.assert_array_equal(at_once._stacks[0], fresh._stacks[0])
 
 
 def test_linked_frames_rebuild_the_stacks_push_frames_built():
@@ -273,3 +279,25 @@ def test_loop_flags_on_raw_frames_match_sb3s_preprocessing_bit_for_bit():
     # Frames whose byte count 8 does not divide are compared byte by byte: the same flags.
     small = stacks[:, :, :5, :5].contiguous()
     assert extractor.flags(small).tolist() == [[1, 0], [0, 1], [0, 0], [0, 1], [0, 0]]
+
+
+@pytest.mark.parametrize("stack", [1, 3])
+def test_a_rollouts_teachers_computed_at_once_equal_those_computed_at_each_step(stack):
+    """PriorTeacher's teachers, computed once per rollout (the default) or at each step: the same segment, the same
+    teachers (a prior with memory among them), and the new policy's own stack of ``stack`` frames."""
+    from sb3_disagree.options import PriorSet, PriorTeacher
+
+    def segment_teacher(per_rollout: bool) -> tuple[np.ndarray, np.ndarray]:
+        env = make_vec_env(CueEnv, n_envs=2, seed=0)
+        priors = PriorSet([ACER("MlpPolicy", env, policy_kwargs=dict(frame_stack=2), seed=1),
+                           ACER("MlpPolicy", env, seed=2)])
+        model = ACER("MlpPolicy", env, n_steps=5, replay_start=10_000, distill_coef=1.0, seed=3,
+                     policy_kwargs=dict(frame_stack=stack), behaviour=PriorTeacher(priors, per_rollout=per_rollout))
+        model.learn(30)  # three rollouts of 5 steps x 2 envs; episodes of CueEnv end within them
+        return model.replay_buffer.teacher[:3].copy(), model.replay_buffer.actions[:3].copy()
+
+    at_once, actions = segment_teacher(True)
+    per_step, same_actions = segment_teacher(False)
+    np.testing.assert_array_equal(actions, same_actions)
+    assert at_once.any() and np.allclose(at_once.sum(-1), 1.0)
+    np.testing.assert_allclose(at_once, per_step, atol=1e-6)

@@ -29,6 +29,9 @@ class FakePriors:
         self.step += 1
         return self.fn(self.step - 1)
 
+    def probs_sequence(self, observations, episode_starts):
+        return th.stack([self.probs(o, s) for o, s in zip(observations, episode_starts)], dim=1)
+
 
 def _setup(behaviour, n_envs):
     behaviour.setup(SimpleNamespace(n_envs=n_envs, device=th.device("cpu")))
@@ -246,10 +249,18 @@ def test_prior_teacher_acts_with_the_policy_and_offers_the_priors_mixture():
     n = 3000
     prior_probs = _priors(AGREE, n)
     pi = th.tensor([[0.2, 0.5, 0.3]]).expand(n, A)
-    b = _setup(PriorTeacher(FakePriors(prior_probs)), n)
+    b = _setup(PriorTeacher(FakePriors(prior_probs), per_rollout=False), n)
     step = b(None, pi, [{}] * n, np.ones(n, dtype=bool))
     assert th.allclose(step.mu, pi) and np.allclose(_empirical([step])[0], pi[0].numpy(), atol=0.03)
     assert th.allclose(step.teacher, prior_probs.mean(0)) and not step.followed.any()
+    # By default the teachers come once per rollout, one row per step, and the steps carry none.
+    b = _setup(PriorTeacher(FakePriors(prior_probs)), n)
+    b.rollout_start()
+    steps = [b(None, pi, [{}] * n, np.ones(n, dtype=bool)) for _ in range(3)]
+    assert all(s.teacher is None for s in steps) and th.allclose(steps[0].mu, pi)
+    teacher = b.rollout_teacher()
+    assert teacher.shape == (3, n, A) and np.allclose(teacher, prior_probs.mean(0).numpy())
+    assert b.rollout_teacher() is None  # handed over once
 
 
 def test_prior_teacher_stops_asking_the_priors_once_distillation_has_annealed_to_zero():
@@ -260,13 +271,26 @@ def test_prior_teacher_stops_asking_the_priors_once_distillation_has_annealed_to
     pi = th.tensor([[0.2, 0.5, 0.3]]).expand(n, A)
     model = SimpleNamespace(n_envs=n, device=th.device("cpu"), weight=0.5)
     model.distill_weight = lambda: model.weight
-    b = PriorTeacher(priors)
+    b = PriorTeacher(priors, per_rollout=False)
     b.setup(model)
     assert b(None, pi, [{}] * n, np.ones(n, dtype=bool)).teacher is not None and priors.step == 1
     model.weight = 0.0
     step = b(None, pi, [{}] * n, np.zeros(n, dtype=bool))
     assert step.teacher is None and priors.step == 1  # the priors were not run
     assert th.allclose(step.mu, pi)
+    # Once per rollout: the taught step gets its row, the step after the annealing a row of zeros.
+    b = PriorTeacher(priors)
+    b.setup(model)
+    model.weight = 0.5
+    b.rollout_start()
+    b(None, pi, [{}] * n, np.ones(n, dtype=bool))
+    model.weight = 0.0
+    b(None, pi, [{}] * n, np.zeros(n, dtype=bool))
+    teacher = b.rollout_teacher()
+    assert priors.step == 2 and np.allclose(teacher[0], priors.fn(0).mean(0).numpy()) and not teacher[1].any()
+    b.rollout_start()
+    b(None, pi, [{}] * n, np.zeros(n, dtype=bool))
+    assert b.rollout_teacher() is None and priors.step == 2  # a rollout with no teaching runs no prior
 
 
 def test_greedy_phase_acts_by_the_argmax_with_an_exact_mu_after_its_start():
@@ -277,7 +301,7 @@ def test_greedy_phase_acts_by_the_argmax_with_an_exact_mu_after_its_start():
     prior_probs = _priors(AGREE, n)
     pi = th.tensor([[0.2, 0.5, 0.3]]).expand(n, A)
     model = SimpleNamespace(n_envs=n, device=th.device("cpu"), num_timesteps=0)
-    b = GreedyPhase(PriorTeacher(FakePriors(prior_probs)), start=100, epsilon=0.2)
+    b = GreedyPhase(PriorTeacher(FakePriors(prior_probs), per_rollout=False), start=100, epsilon=0.2)
     b.setup(model)
     before = b(None, pi, [{}] * n, np.ones(n, dtype=bool))
     assert th.allclose(before.mu, pi)  # the inner behaviour's step, untouched

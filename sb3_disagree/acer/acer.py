@@ -307,6 +307,7 @@ class ACER(BaseAlgorithm):
         followed_buf = np.zeros((self.n_steps, n_envs), dtype=np.float32)
 
         callback.on_rollout_start()
+        self.behaviour_policy.rollout_start()
         for step in range(self.n_steps):
             observations[step] = self._last_stack
             with th.no_grad():
@@ -341,6 +342,9 @@ class ACER(BaseAlgorithm):
             self._last_episode_starts = dones
             self._last_infos = self._infos_of_current_obs(env, infos, dones)
 
+        late = self.behaviour_policy.rollout_teacher()  # teachers computed once for the whole rollout
+        if late is not None:
+            teacher_buf[: len(late)] = late
         observations[self.n_steps] = self._last_stack
         self.last_rollout_tags = None if any(t is None for t in tags_buf) else np.stack(tags_buf)
         callback.update_locals(locals())
