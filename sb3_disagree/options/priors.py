@@ -51,19 +51,7 @@ class PriorSet:
             priors with memory); None: only the first call starts them
         :return: pi_i(.|s) for every prior, shape (k, n_envs, n_actions)
         """
-        out, converted = [], {}
-        for i, (prior, j) in enumerate(zip(self.priors, self._converter)):
-            if j not in converted:
-                converted[j] = prior.policy.obs_to_tensor(observations)[0]
-            obs = converted[j]
-            if self._memory[i] > 1:
-                stack = self._stacks[i]
-                fresh = stack is None or stack.shape[0] != obs.shape[0]
-                self._stacks[i] = push_frames(None if fresh else stack, obs.cpu().numpy(),
-                                              None if fresh else episode_starts, self._memory[i])
-                obs = th.as_tensor(self._stacks[i])
-            out.append(prior.policy.get_distribution(obs.to(prior.policy.device)).distribution.probs)
-        return th.stack(out)
+        return self.probs_sequence([observations], [episode_starts])[:, 0]
 
     @th.no_grad()
     def probs_sequence(self, observations: Sequence[np.ndarray], episode_starts: Sequence[np.ndarray]) -> th.Tensor:
