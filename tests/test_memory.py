@@ -172,7 +172,7 @@ def test_a_prior_with_memory_gets_its_own_stack_as_its_predict_would_build_it():
         want = stacked.policy.get_distribution(th.as_tensor(state[0])).distribution.probs
         assert th.allclose(got[0], want)
         assert th.allclose(got[1], single.policy.get_distribution(th.as_tensor(obs)).distribution.probs)
-    # All five steps at once (a rollout's teachers): the same distributions, the stacks left where they were.
+    # All five steps at once (a rollout's teachers): the same distributions, the stacks left as step by step.
     at_once = PriorSet([stacked, single])
     fresh = PriorSet([stacked, single])
     per_step = th.stack([fresh.probs(obs, start) for obs, start in zip(frames, starts)], dim=1)

@@ -65,10 +65,11 @@ class PriorSet:
         :return: pi_i(.|s) for every prior and step, shape (k, steps, n_envs, n_actions)
         """
         steps, n = len(observations), len(observations[0])
+        batch = observations[0] if steps == 1 else np.concatenate(observations)  # probs' single step: no copy
         out, converted = [], {}
         for i, (prior, j) in enumerate(zip(self.priors, self._converter)):
             if j not in converted:
-                converted[j] = prior.policy.obs_to_tensor(np.concatenate(observations))[0]
+                converted[j] = prior.policy.obs_to_tensor(batch)[0]
             obs = converted[j]
             if self._memory[i] > 1:
                 frames = obs.cpu().numpy().reshape(steps, n, *obs.shape[1:])
@@ -79,7 +80,7 @@ class PriorSet:
                     self._stacks[i] = push_frames(None if fresh else stack, frames[t],
                                                   None if fresh else episode_starts[t], self._memory[i])
                     stacks.append(self._stacks[i])
-                obs = th.as_tensor(np.concatenate(stacks))
+                obs = th.as_tensor(stacks[0] if steps == 1 else np.concatenate(stacks))
             probs = prior.policy.get_distribution(obs.to(prior.policy.device)).distribution.probs
             out.append(probs.reshape(steps, n, -1))
         return th.stack(out)

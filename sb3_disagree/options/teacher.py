@@ -58,13 +58,12 @@ class PriorTeacher(BehaviourPolicy):
                              followed=np.zeros(len(probs), np.float32))
 
     def rollout_teacher(self) -> Optional[np.ndarray]:
-        taught = [t for t, step in enumerate(self._steps) if step is not None]
+        steps, self._steps = self._steps, []
+        taught = [t for t, step in enumerate(steps) if step is not None]
         if not taught:
-            self._steps = []
             return None
-        mixture = self.priors.probs_sequence([self._steps[t][0] for t in taught],
-                                             [self._steps[t][1] for t in taught]).mean(0).cpu().numpy()
-        out = np.zeros((len(self._steps), *mixture.shape[1:]), dtype=np.float32)
+        mixture = self.priors.probs_sequence([steps[t][0] for t in taught],
+                                             [steps[t][1] for t in taught]).mean(0).cpu().numpy()
+        out = np.zeros((len(steps), *mixture.shape[1:]), dtype=np.float32)
         out[taught] = mixture
-        self._steps = []
         return out

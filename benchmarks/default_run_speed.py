@@ -1,12 +1,12 @@
 """
-The C allocator's part in `dopt train`'s speed: the default run (kickstarting, overlapped, three frames with loop
-flags, priors shower and toilet) in fresh processes, with glibc's default settings and with
-``sb3_disagree.allocator.keep_freed_memory`` (what ``train`` applies), taking turns so that the machine's slow
-spells fall on both; env steps/s after a warm-up and the process's minor page faults. Written into
-docs/benchmarks.md. ``--set teacher`` compares instead the kickstarting teacher computed once per rollout
-(``PriorTeacher``'s default) with the teacher computed at each step, both with the allocator's settings.
+`dopt train`'s default run (kickstarting, overlapped, three frames with loop flags, priors shower and toilet) timed
+two ways, in fresh processes taking turns so that the machine's slow spells fall on both; env steps/s after a
+warm-up and the process's minor page faults. Written into docs/benchmarks.md. ``--set allocator``: glibc's default
+settings against ``sb3_disagree.allocator.keep_freed_memory`` (what ``train`` applies); ``--set teacher``: the
+kickstarting teacher computed at each step against once per rollout (``PriorTeacher``'s default), both with the
+allocator's settings.
 
-    python benchmarks/allocator_speed.py [--set allocator|teacher] [--steps 12000] [--warm 2400] [--repeats 2] [--write]
+    python benchmarks/default_run_speed.py [--set allocator|teacher] [--steps 12000] [--warm 2400] [--repeats 2] [--write]
 """
 
 import argparse
@@ -69,7 +69,7 @@ def main() -> None:
 
     table = "\n".join(f"| {v} | {cell([r['rate'] for r in rows[v]], '.0f')} | "
                       f"{cell([r['minflt'] / 1e6 for r in rows[v]], '.2f')} |" for v in variants)
-    body = (f"Command: `python benchmarks/allocator_speed.py --set {args.set} --steps {args.steps} --warm {args.warm} --repeats "
+    body = (f"Command: `python benchmarks/default_run_speed.py --set {args.set} --steps {args.steps} --warm {args.warm} --repeats "
             f"{args.repeats}`; {platform.machine()}, {os.cpu_count()} cores, one run at a time; median (min-max) of "
             f"{args.repeats} runs per row, the rows taking turns, each in a fresh process. `dopt train --goal bathtub`'s "
             f"default run (kickstarting, `--overlap`, three frames with loop flags), env steps/s over {args.steps} "
