@@ -19,7 +19,7 @@ def keep_freed_memory() -> bool:
 
     A training step allocates and frees arrays and tensors of a few MB (replay segments of stacked frames, the
     CNN's activations). glibc's defaults serve such blocks from fresh mappings, or hand the heap's top back to
-    the OS, so each step page-faults its memory in again: 3-4 million minor page faults in 16k env steps of
+    the OS, so each step page-faults its memory in again: about 3 million minor page faults in 14k env steps of
     ``dopt train``, against 0.2 million with these settings, and 14% more env steps/s (docs/benchmarks.md,
     "The allocator"). The process keeps at most ``TRIM_THRESHOLD`` of free memory at its heap's top.
 

@@ -57,7 +57,7 @@ class PriorSet:
     def probs_sequence(self, observations: Sequence[np.ndarray], episode_starts: Sequence[np.ndarray]) -> th.Tensor:
         """
         ``probs`` for consecutive env steps at once: one forward pass per prior over all of them (a rollout's
-        teachers: one call on 80 frames costs about half of 20 calls on 4). The stacks of the priors with memory
+        teachers: one large batch instead of many small ones). The stacks of the priors with memory
         advance step by step as ``probs`` would advance them.
 
         :param observations: Per step, the batch of observations as the VecEnv gave them, each of shape (n_envs, ...)

@@ -18,7 +18,7 @@ class PriorTeacher(BehaviourPolicy):
     forward passes cost about a tenth of a step, and the steps carry no teacher.
 
     The teachers are computed once per rollout, over all its steps (``PriorSet.probs_sequence``: one forward pass
-    per prior on 80 frames instead of 20 on 4, 22-29 ms less per rollout on 2 cores), and handed over by
+    per prior on 80 frames instead of 20 on 4; docs/benchmarks.md), and handed over by
     ``rollout_teacher``; the steps themselves carry none. ``per_rollout=False`` computes them at each step.
 
     :param priors: The teachers
