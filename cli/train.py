@@ -56,7 +56,9 @@ def _run_options() -> list:
                                     f"last this many training steps, no env step more (default: {DOPT_TRAIN_HARVEST} for "
                                     "--mode kickstart, 0 (off) for the others)",
              "consistency_harvest_average": "Over the harvest the new policy acts by the moving average of its "
-                                            "weights, what model.zip acts with (default: on with the default harvest)",
+                                            "weights, what model.zip acts with (default: off, the current weights)",
+             "greedy_phase": "The last this many env steps act by the new policy's argmax, --greedy-epsilon of its "
+                             "samples (default: the harvest's steps for a new --mode kickstart run, else 0)",
              "frame_stack": "The new policy sees its last this many observations (its memory; default: "
                             f"{DOPT_TRAIN_FRAME_STACK} with --loop-flags, else 1)",
              "loop_flags": "The new policy's CNN sees the newest frame, and flags say whether it equals each older "
@@ -64,17 +66,17 @@ def _run_options() -> list:
                            "--mode kickstart on image observations)"}
     return [*options_of(RunConfig, skip=("acer_kwargs", "env_kwargs"),
                         types={"priors": str, "steps": Optional[int], "consistency_harvest": Optional[int],
-                               "consistency_harvest_average": Optional[bool], "frame_stack": Optional[int],
-                               "loop_flags": Optional[bool]},
+                               "frame_stack": Optional[int], "loop_flags": Optional[bool],
+                               "greedy_phase": Optional[int]},
                         flags={"env_id": "--env", "consistency_harvest_average":
                                "--consistency-harvest-average/--no-consistency-harvest-average",
                                "loop_flags": "--loop-flags/--no-loop-flags"}, helps=helps,
                         # dopt train overlaps the replay updates (faster on two cores); --no-overlap for the
-                        # sequential loop the experiments use. It fits model.zip to its own last episodes' loop-free
-                        # paths, acting by the average over them (DOPT_TRAIN_HARVEST); None: resolved in train.
-                        # Its new kickstarting runs see three frames, with loop flags (DOPT_TRAIN_FRAME_STACK).
+                        # sequential loop the experiments use. It fits model.zip to the loop-free paths of its own
+                        # last episodes, acted greedily by the current weights (DOPT_TRAIN_HARVEST); None: resolved in
+                        # train. Its new kickstarting runs see three frames, with loop flags (DOPT_TRAIN_FRAME_STACK).
                         defaults={"overlap": True, "steps": None, "consistency_harvest": None,
-                                  "consistency_harvest_average": None, "frame_stack": None, "loop_flags": None}),
+                                  "frame_stack": None, "loop_flags": None, "greedy_phase": None}),
             *options_of(run, only=("out", "resume", "force"), types={"resume": Optional[Path], "out": Path}),
             *options_of(_cli_only)]
 
@@ -128,17 +130,18 @@ def train(**options) -> None:
 
 
 def _default_harvest(options: dict, resume: Optional[Path]) -> None:
-    """dopt train's harvest where none is given: ``DOPT_TRAIN_HARVEST``, acting by the average, for a new run of
-    the default mode (kickstarting, where it was measured); none for the other modes, and none asked of a resumed
-    run (it keeps its saved settings)."""
+    """dopt train's harvest where none is given: ``DOPT_TRAIN_HARVEST`` for a new run of the default mode
+    (kickstarting, where it was measured), acted greedily: a new kickstarting run's harvest, whatever its length, is
+    a greedy phase too unless ``--greedy-phase`` says otherwise. None for the other modes, and none asked of a
+    resumed run (it keeps its saved settings)."""
     from sb3_disagree.run.config import DOPT_TRAIN_HARVEST
 
+    new_kickstart = resume is None and options["mode"] == "kickstart"
     if options["consistency_harvest"] is None:
-        new_kickstart = resume is None and options["mode"] == "kickstart"
         options["consistency_harvest"] = DOPT_TRAIN_HARVEST if new_kickstart else 0
-        if options["consistency_harvest_average"] is None:
-            options["consistency_harvest_average"] = bool(options["consistency_harvest"])
-    options["consistency_harvest_average"] = bool(options["consistency_harvest_average"])
+    if options["greedy_phase"] is None:
+        budget = options["steps"] or 100_000
+        options["greedy_phase"] = min(options["consistency_harvest"], budget) if new_kickstart else 0
 
 
 def _default_memory(options: dict, resume: Optional[Path]) -> None:

@@ -41,9 +41,9 @@ def test_train_writes_the_run_folder(zoo, tmp_path, mode):
     assert list((run / "monitor").glob("*.monitor.csv")) and list(run.glob("events.out.tfevents*"))
     cfg = yaml.safe_load((run / "config.yaml").read_text())
     assert cfg["finished"] and cfg["num_timesteps"] >= 400
-    # dopt train's default harvest (all 400 steps here), acting by the average: kickstarting only
-    assert (cfg["consistency_harvest"], cfg["consistency_harvest_average"]) == (
-        (30_000, True) if mode == "kickstart" else (0, False))
+    # dopt train's default harvest (all 400 steps here), acted greedily by the current weights: kickstarting only
+    assert (cfg["consistency_harvest"], cfg["consistency_harvest_average"], cfg["greedy_phase"]) == (
+        (30_000, False, 400) if mode == "kickstart" else (0, False, 0))
     assert ("harvest" in (cfg.get("consistency") or {})) == (mode == "kickstart")
     assert (cfg["frame_stack"], cfg["loop_flags"]) == (1, False)  # state observations: no frames to compare
     if mode == "finetune":  # started from the nearest prior: its policy head, a Q head of its own
@@ -66,13 +66,32 @@ def test_train_writes_the_run_folder(zoo, tmp_path, mode):
 
 def test_the_default_harvest_gives_way_to_the_options_given(zoo, tmp_path):
     result = runner.invoke(app, _train_args(zoo, tmp_path, "--mode", "kickstart", "--consistency-harvest", "200",
-                                            "--no-consistency-harvest-average", "--card-episodes", "0"))
+                                            "--consistency-harvest-average", "--greedy-phase", "0",
+                                            "--card-episodes", "0"))
     assert result.exit_code == 0, result.output
     assert "of its last 200 training steps" in result.output
     cfg = yaml.safe_load((tmp_path / "sb3_disagree__ApartmentState-v0" / "bathtub" / "kickstart-0" / "config.yaml")
                          .read_text())
-    assert (cfg["consistency_harvest"], cfg["consistency_harvest_average"]) == (200, False)
+    assert (cfg["consistency_harvest"], cfg["consistency_harvest_average"], cfg["greedy_phase"]) == (200, True, 0)
     assert cfg["consistency"]["harvest"]["episodes"] >= 0
+
+
+@pytest.mark.parametrize("given,mode,resume,expected", [
+    ({}, "kickstart", None, (30_000, 30_000)),  # dopt train's default: the harvest acted greedily
+    ({"steps": 20_000}, "kickstart", None, (30_000, 20_000)),  # a harvest past the budget: all of it greedy
+    ({"consistency_harvest": 200}, "kickstart", None, (200, 200)),  # the harvest asked for, acted greedily
+    ({"consistency_harvest": 0}, "kickstart", None, (0, 0)),  # no harvest, no greedy phase
+    ({"greedy_phase": 0}, "kickstart", None, (30_000, 0)),  # a harvest sampled as training samples
+    ({"greedy_phase": 5_000}, "kickstart", None, (30_000, 5_000)),
+    ({}, "disagreement", None, (0, 0)),  # not measured there
+    ({}, "kickstart", "RUN", (0, 0)),  # a resumed run keeps its saved settings
+])
+def test_the_default_harvest_gives_way_to_the_options_given_each(given, mode, resume, expected):
+    from sb3_disagree.cli.train import _default_harvest
+
+    options = {"consistency_harvest": None, "greedy_phase": None, "steps": None, "mode": mode, **given}
+    _default_harvest(options, resume)
+    assert (options["consistency_harvest"], options["greedy_phase"]) == expected
 
 
 @pytest.mark.parametrize("given,env,mode,resume,expected", [
