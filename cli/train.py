@@ -114,9 +114,10 @@ def train(**options) -> None:
         options["acer_kwargs"] = {k: v for k in ("reward_scale", "ema_decay") if (v := options.pop(k)) is not None}
         options["env_kwargs"] = {k: v for k in ("collision_penalty", "reward_distance") if (v := options.pop(k)) is not None}
         steps = options["steps"]
-        _default_harvest(options, resume)
+        budget = steps or 100_000
+        _default_harvest(options, resume, budget)
         _default_memory(options, resume)
-        config = RunConfig(**{**options, "steps": steps or 100_000, "priors": _priors(options["priors"])})
+        config = RunConfig(**{**options, "steps": budget, "priors": _priors(options["priors"])})
         config.validate() if resume is None else check_resume(config, resume, force)
         display = _Display(every)
         with display as callback:
@@ -129,18 +130,20 @@ def train(**options) -> None:
         _show_end(run_dir, model, finished, config.goal)
 
 
-def _default_harvest(options: dict, resume: Optional[Path]) -> None:
+def _default_harvest(options: dict, resume: Optional[Path], budget: int) -> None:
     """dopt train's harvest where none is given: ``DOPT_TRAIN_HARVEST`` for a new run of the default mode
     (kickstarting, where it was measured), acted greedily: a new kickstarting run's harvest, whatever its length, is
     a greedy phase too unless ``--greedy-phase`` says otherwise. None for the other modes, and none asked of a
-    resumed run (it keeps its saved settings)."""
+    resumed run (it keeps its saved settings).
+
+    :param budget: The run's env steps (a harvest longer than the budget is acted greedily throughout)
+    """
     from sb3_disagree.run.config import DOPT_TRAIN_HARVEST
 
     new_kickstart = resume is None and options["mode"] == "kickstart"
     if options["consistency_harvest"] is None:
         options["consistency_harvest"] = DOPT_TRAIN_HARVEST if new_kickstart else 0
     if options["greedy_phase"] is None:
-        budget = options["steps"] or 100_000
         options["greedy_phase"] = min(options["consistency_harvest"], budget) if new_kickstart else 0
 
 

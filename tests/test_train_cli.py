@@ -89,8 +89,8 @@ def test_the_default_harvest_gives_way_to_the_options_given(zoo, tmp_path):
 def test_the_default_harvest_gives_way_to_the_options_given_each(given, mode, resume, expected):
     from sb3_disagree.cli.train import _default_harvest
 
-    options = {"consistency_harvest": None, "greedy_phase": None, "steps": None, "mode": mode, **given}
-    _default_harvest(options, resume)
+    options = {"consistency_harvest": None, "greedy_phase": None, "mode": mode, **given}
+    _default_harvest(options, resume, options.pop("steps", 100_000))
     assert (options["consistency_harvest"], options["greedy_phase"]) == expected
 
 
