@@ -4,7 +4,7 @@ steps from env seed 30 000, then the refined prior alone over 300 episodes greed
 seeds (10 000+); docs/results.md, "Greedy consistency after training". The refined model and its numbers go to
 OUT (default: prior-consistency/ in the current folder).
 
-    python benchmarks/prior_consistency.py shower [--rounds 3] [--out prior-consistency]
+    python benchmarks/prior_consistency.py shower [--rounds 3] [--zoo ZOO] [--out prior-consistency]
 """
 
 import argparse
@@ -29,9 +29,10 @@ def main() -> None:
     parser.add_argument("goal")
     parser.add_argument("--rounds", type=int, default=3)
     parser.add_argument("--out", type=Path, default=Path("prior-consistency"))
+    parser.add_argument("--zoo", type=Path, default=DEFAULT_ZOO, help="the zoo the prior is copied from")
     args = parser.parse_args()
     th.set_num_threads(1)
-    model = ACER.load(DEFAULT_ZOO / env_dir_name(ENV) / args.goal / "model.zip", device="cpu")
+    model = ACER.load(args.zoo / env_dir_name(ENV) / args.goal / "model.zip", device="cpu")
     env = make_vec(ENV, args.goal, n_envs=4, seed=30_000)
     start = time.perf_counter()
     greedy_consistency(model, env, rounds=args.rounds, steps=20_000, on_round=print)

@@ -183,7 +183,8 @@ def eval_prior(
 def _make_options() -> list:
     from sb3_disagree.priors.make import make_prior, train_dagger
 
-    return [*options_of(make_prior, only=("goal", "method", "env_id", "steps", "n_envs", "seed", "episodes", "replace"),
+    return [*options_of(make_prior, only=("goal", "method", "env_id", "steps", "n_envs", "seed", "episodes", "replace",
+                                                 "consistency_rounds", "consistency_steps"),
                         flags={"env_id": "--env"}, defaults={"env_id": DEFAULT_ENV}),
             *options_of(train_dagger, only=("rounds", "steps_per_round", "epochs", "final_epochs",
                                             "validation_episodes", "learner_actions", "frame_stack", "loop_flags"),
@@ -204,7 +205,8 @@ def train(**options) -> None:
                                               "validation_episodes", "learner_actions", "frame_stack",
                                               "loop_flags")}
         with _progress() as progress:
-            task = progress.add_task(f"{method} {goal}", total=dagger["rounds"] if method == "dagger" else 1)
+            total = (dagger["rounds"] if method == "dagger" else 1) + options["consistency_rounds"]
+            task = progress.add_task(f"{method} {goal}", total=total)
             entry, evaluations = make_prior(_zoo(zoo), goal, method=method, command=command_line(),
                                             progress=lambda line: (progress.advance(task), console.print(line)),
                                             **options, **(dagger if method == "dagger" else {}))

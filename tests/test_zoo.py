@@ -264,3 +264,22 @@ def test_cli_train_dagger_with_loop_flags(tmp_path):
         expected = prior.policy.get_distribution(stack).distribution.probs
         assert th.equal(extractor.flags(stack), th.tensor([[1.0, 0.0]] * 2))
     assert probs.shape == (2, 2, 3) and th.allclose(probs[0], expected) and th.allclose(probs[1], expected)
+
+
+def test_cli_train_prior_with_consistency_phase(tmp_path):
+    """--consistency-rounds refines the trained prior by the greedy-consistency phase on env seeds of its own and
+    records the phase on the card; bad settings are refused before anything is written."""
+    base = ["priors", "train", "--goal", "toilet", "--env", STATE_ID, "--zoo", str(tmp_path), "--rounds", "2",
+            "--steps-per-round", "200", "--epochs", "1", "--episodes", "2"]
+    for bad, words in ((["--consistency-rounds", "-1"], "--consistency-rounds"),
+                       (["--consistency-rounds", "1", "--consistency-steps", "3"], "--consistency-steps"),
+                       (["--consistency-rounds", "1", "--method", "ppo"], "not PPO")):
+        result = runner.invoke(app, [*base, *bad])
+        assert result.exit_code == 2 and words in result.output and not list(tmp_path.iterdir()), result.output
+    result = runner.invoke(app, [*base, "--consistency-rounds", "2", "--consistency-steps", "800"])
+    assert result.exit_code == 0, result.output
+    phase = Zoo(tmp_path).get("toilet", STATE_ID).card.training["consistency"]
+    assert phase["rounds"] == 2 and phase["steps_per_round"] == 800 and len(phase["per_round"]) == 2
+    assert [r["env_steps"] for r in phase["per_round"]] == [800, 800]
+    assert all(r["successes"] <= r["episodes"] for r in phase["per_round"])
+    assert " ".join(result.output.split()).count("consistency round:") == 2

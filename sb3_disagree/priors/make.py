@@ -237,7 +237,8 @@ def evaluate_entry(zoo: Any, entry: Any, episodes: int, deterministic: bool, see
 
 
 def make_prior(zoo: Any, goal: str, env_id: str, method: str = "dagger", steps: int = 200_000, n_envs: int = 4,
-               seed: int = 0, episodes: int = 100, replace: bool = False, command: str = "",
+               seed: int = 0, episodes: int = 100, replace: bool = False, consistency_rounds: int = 0,
+               consistency_steps: int = 20_000, command: str = "",
                progress: Optional[Callable[[str], None]] = None, **dagger_kwargs: Any) -> tuple[Any, dict[str, Any]]:
     """
     Train a prior, add it to the zoo, and record its evaluation alone (greedy and sampled) on its card: what
@@ -252,8 +253,12 @@ def make_prior(zoo: Any, goal: str, env_id: str, method: str = "dagger", steps: 
     :param seed: Seed of the policy and the rollouts
     :param episodes: Evaluation episodes each way for the card (0: none)
     :param replace: Replace an existing prior for this goal
+    :param consistency_rounds: After training, rounds of the greedy-consistency phase (the prior acts greedily,
+        sampling where it loops, and is fitted to the loop-free paths of its episodes that reach the goal; the
+        phase ``dopt consistency`` runs on a new policy), on env seeds ``seed + CONSISTENCY_SEED_OFFSET``; 0: none
+    :param consistency_steps: Env steps per round of that phase
     :param command: The command that made it, for the card
-    :param progress: Called with a line of text as training goes (DAgger's rounds)
+    :param progress: Called with a line of text as training goes (DAgger's rounds, the phase's rounds)
     :param dagger_kwargs: :func:`train_dagger`'s own settings (rounds, epochs, validation_episodes, ...)
     :return: The zoo entry (as read back) and the evaluations by label ("greedy", "sampled")
     """
@@ -268,6 +273,11 @@ def make_prior(zoo: Any, goal: str, env_id: str, method: str = "dagger", steps: 
         raise ValueError(f"the zoo already has a prior for {goal!r} in {env_id}; pass --replace to retrain it")
     if dagger_kwargs.get("validation_episodes", 0) < 0:
         raise ValueError(f"--validation-episodes must be >= 0, got {dagger_kwargs['validation_episodes']}")
+    if consistency_rounds < 0 or (consistency_rounds and consistency_steps < n_envs):
+        raise ValueError(f"--consistency-rounds must be >= 0 and --consistency-steps >= {n_envs} (one per env), got "
+                         f"{consistency_rounds} and {consistency_steps}")
+    if consistency_rounds and method == "ppo":
+        raise ValueError("the greedy-consistency phase refines an ACER policy (--method dagger or acer), not PPO")
     venv = make_vec(env_id, goal, n_envs=n_envs, seed=seed)
     if method == "dagger":
         validation = dagger_kwargs.get("validation_episodes", 0)
@@ -276,10 +286,42 @@ def make_prior(zoo: Any, goal: str, env_id: str, method: str = "dagger", steps: 
                                      validation_seed=PRIOR_VALIDATION_SEED, progress=progress, **dagger_kwargs)
     else:
         model, record = train_rl(venv, method, steps, seed=seed, progress_bar=progress is not None)
+    venv.close()
+    if consistency_rounds:
+        record["consistency"] = refine_prior(model, env_id, goal, consistency_rounds, consistency_steps, n_envs, seed,
+                                             progress)
     with tempfile.TemporaryDirectory() as tmp:
         model.save(Path(tmp) / "model.zip")
         entry = zoo.add(Path(tmp) / "model.zip", goal, env_id, training=record, command=command, replace=replace)
     return record_evaluations(zoo, entry, episodes) if episodes else (entry, {})
+
+
+def refine_prior(model: ACER, env_id: str, goal: str, rounds: int, steps: int, n_envs: int = 4, seed: int = 0,
+                 progress: Optional[Callable[[str], None]] = None) -> dict[str, Any]:
+    """
+    The greedy-consistency phase (:func:`~sb3_disagree.acer.consistency.greedy_consistency`, three epochs a round)
+    on a trained prior, in place, on env seeds ``seed + CONSISTENCY_SEED_OFFSET``, apart from its training, its
+    validation and its card's.
+
+    :return: The phase's record for the card: its settings, seconds and per-round statistics
+    """
+    from sb3_disagree.acer.consistency import greedy_consistency
+    from sb3_disagree.defaults import CONSISTENCY_SEED_OFFSET
+
+    def on_round(stats: Any) -> None:
+        if progress:
+            progress(f"consistency round: {stats.successes}/{stats.episodes} episodes reached the goal, "
+                     f"{stats.labels} labels, accuracy {stats.accuracy:.3f}")
+
+    env = make_vec(env_id, goal, n_envs=n_envs, seed=seed + CONSISTENCY_SEED_OFFSET)
+    start = time.perf_counter()
+    try:
+        history = greedy_consistency(model, env, rounds, steps, seed=seed, on_round=on_round)
+    finally:
+        env.close()
+    model.policy.sync_averages()  # the average network follows the fitted one, as after DAgger
+    return {"rounds": rounds, "steps_per_round": steps, "seconds": round(time.perf_counter() - start, 1),
+            "per_round": [r.as_dict() for r in history]}
 
 
 def record_evaluations(zoo: Any, entry: Any, episodes: int,
