@@ -29,13 +29,15 @@ def main() -> None:
     parser.add_argument("goal")
     parser.add_argument("--rounds", type=int, default=3)
     parser.add_argument("--out", type=Path, default=Path("prior-consistency"))
+    parser.add_argument("--loop-uniform", type=float, default=0.0, help="in a loop, the uniform share of the draw")
     parser.add_argument("--zoo", type=Path, default=DEFAULT_ZOO, help="the zoo the prior is copied from")
     args = parser.parse_args()
     th.set_num_threads(1)
     model = ACER.load(args.zoo / env_dir_name(ENV) / args.goal / "model.zip", device="cpu")
     env = make_vec(ENV, args.goal, n_envs=4, seed=30_000)
     start = time.perf_counter()
-    greedy_consistency(model, env, rounds=args.rounds, steps=20_000, on_round=print)
+    greedy_consistency(model, env, rounds=args.rounds, steps=20_000, on_round=print,
+                       loop_uniform=args.loop_uniform)
     result = {"seconds": round(time.perf_counter() - start)}
     for deterministic in (True, False):
         evaluation = evaluate(model, make_vec(ENV, args.goal, n_envs=4, seed=PRIOR_CARD_SEED), 300, deterministic)

@@ -184,7 +184,8 @@ def _make_options() -> list:
     from sb3_disagree.priors.make import make_prior, train_dagger
 
     return [*options_of(make_prior, only=("goal", "method", "env_id", "steps", "n_envs", "seed", "episodes", "replace",
-                                                 "consistency_rounds", "consistency_steps"),
+                                                 "consistency_rounds", "consistency_steps",
+                                                 "consistency_loop_uniform"),
                         flags={"env_id": "--env"}, defaults={"env_id": DEFAULT_ENV}),
             *options_of(train_dagger, only=("rounds", "steps_per_round", "epochs", "final_epochs",
                                             "validation_episodes", "learner_actions", "frame_stack", "loop_flags"),

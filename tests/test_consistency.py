@@ -65,6 +65,18 @@ def test_collect_escapes_labels_only_successful_loop_free_paths():
     assert not ((actions == 2) & np.isin(heading, [1, 3])).any()
 
 
+def test_a_sharp_looping_policy_escapes_only_with_a_uniform_share_in_loops():
+    """pi = 1 on turning left: sampling from pi in a loop turns left again, forever; a uniform share escapes."""
+    model = _spinning_model()
+    with th.no_grad():
+        model.policy.net.action_net.bias.copy_(th.tensor([30.0, 0.0, 0.0]))
+    env = make_vec_env(TurnEnv, n_envs=4, seed=1)
+    _, counts = collect_escapes(model, env, 800, np.random.default_rng(0))
+    assert counts["episodes"] > 0 and counts["successes"] == 0
+    labels, counts = collect_escapes(model, env, 800, np.random.default_rng(0), loop_uniform=0.5)
+    assert counts["successes"] > 0 and (np.asarray(labels.actions) == 2).any()
+
+
 @pytest.mark.parametrize("frame_stack", [1, 2])
 def test_phase_turns_a_looping_greedy_policy_into_one_that_reaches_the_goal(frame_stack):
     model = _spinning_model(frame_stack)

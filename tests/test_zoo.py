@@ -273,6 +273,7 @@ def test_cli_train_prior_with_consistency_phase(tmp_path):
             "--steps-per-round", "200", "--epochs", "1", "--episodes", "2"]
     for bad, words in ((["--consistency-rounds", "-1"], "--consistency-rounds"),
                        (["--consistency-rounds", "1", "--consistency-steps", "3"], "--consistency-steps"),
+                       (["--consistency-rounds", "1", "--consistency-loop-uniform", "1.5"], "[0, 1]"),
                        (["--consistency-rounds", "1", "--method", "ppo"], "not PPO")):
         result = runner.invoke(app, [*base, *bad])
         assert result.exit_code == 2 and words in result.output and not list(tmp_path.iterdir()), result.output
@@ -280,6 +281,7 @@ def test_cli_train_prior_with_consistency_phase(tmp_path):
     assert result.exit_code == 0, result.output
     phase = Zoo(tmp_path).get("toilet", STATE_ID).card.training["consistency"]
     assert phase["rounds"] == 2 and phase["steps_per_round"] == 800 and len(phase["per_round"]) == 2
+    assert phase["loop_uniform"] == 0.5  # the default: a prior is sharp
     assert [r["env_steps"] for r in phase["per_round"]] == [800, 800]
     assert all(r["successes"] <= r["episodes"] for r in phase["per_round"])
     assert " ".join(result.output.split()).count("consistency round:") == 2

@@ -95,7 +95,7 @@ SAMPLING = ("loops", "always")  # where the collection samples instead of acting
 
 
 def collect_escapes(model: Any, env: VecEnv, steps: int, rng: np.random.Generator,
-                    sampling: str = "loops") -> tuple[_Labels, dict[str, int]]:
+                    sampling: str = "loops", loop_uniform: float = 0.0) -> tuple[_Labels, dict[str, int]]:
     """
     Act greedily with the model's acting network, sampling from it only where the newest frame was already seen
     in the episode, for ``steps`` env steps; return the loop-free labels of the episodes that reached the goal
@@ -106,6 +106,8 @@ def collect_escapes(model: Any, env: VecEnv, steps: int, rng: np.random.Generato
     :param steps: Env steps over all envs
     :param rng: Draws of the sampled actions
     :param sampling: "loops" (greedy, sampling in loops) or "always" (every action sampled, as training acts)
+    :param loop_uniform: In a loop, the share of the uniform distribution in what is sampled,
+        ``(1 - u) pi + u / n``: a sharp policy that loops (pi near 1 on turning back) escapes only by this
     :return: The labels and counts (env_steps, episodes, successes)
     """
     if sampling not in SAMPLING:
@@ -122,7 +124,10 @@ def collect_escapes(model: Any, env: VecEnv, steps: int, rng: np.random.Generato
         for i in range(n):
             key = obs[i].tobytes()
             if sampling == "always" or key in seen[i]:  # a pose seen before: the greedy policy loops, so sample
-                actions[i] = rng.choice(len(probs[i]), p=probs[i] / probs[i].sum())
+                p = probs[i] / probs[i].sum()
+                if key in seen[i] and loop_uniform:
+                    p = (1 - loop_uniform) * p + loop_uniform / len(p)
+                actions[i] = rng.choice(len(p), p=p)
             seen[i].add(key)
             trails.add(i, stack[i], key, int(actions[i]))
         new_obs, _, dones, infos = env.step(actions)
@@ -167,7 +172,7 @@ def fit_labels(policy: Any, inputs: np.ndarray, actions: np.ndarray, epochs: int
 
 def greedy_consistency(model: Any, env: Optional[VecEnv], rounds: int = 3, steps: int = 20_000, epochs: int = 3,
                        learning_rate: float = 3e-4, batch_size: int = 128, seed: int = 0,
-                       on_round: Optional[Any] = None, sampling: str = "loops",
+                       on_round: Optional[Any] = None, sampling: str = "loops", loop_uniform: float = 0.0,
                        harvest: Optional["HarvestLabels"] = None) -> list[RoundStats]:
     """
     The greedy-consistency phase: ``rounds`` times, collect ``steps`` env steps acting greedily (sampling only
@@ -186,6 +191,8 @@ def greedy_consistency(model: Any, env: Optional[VecEnv], rounds: int = 3, steps
     :param seed: Seed of the sampled actions and the minibatches
     :param on_round: Called with each round's :class:`RoundStats`
     :param sampling: Where the collection samples: "loops" (the phase) or "always" (as training acts)
+    :param loop_uniform: In a loop, the share of the uniform distribution in the sampled one (see
+        :func:`collect_escapes`)
     :param harvest: The labels a :class:`HarvestLabels` kept during training
     :return: Each round's statistics (with ``rounds`` 0, the harvest's fit: its episodes, 0 env steps)
     """
@@ -208,7 +215,7 @@ def greedy_consistency(model: Any, env: Optional[VecEnv], rounds: int = 3, steps
         return [fit(0, trails.episodes, trails.successes, len(actions))]
     history = []
     for _ in range(rounds):
-        labels, counts = collect_escapes(model, env, steps, rng, sampling)
+        labels, counts = collect_escapes(model, env, steps, rng, sampling, loop_uniform)
         inputs += labels.inputs
         actions += labels.actions
         history.append(fit(counts["env_steps"], counts["episodes"], counts["successes"], len(labels.actions)))

@@ -238,7 +238,7 @@ def evaluate_entry(zoo: Any, entry: Any, episodes: int, deterministic: bool, see
 
 def make_prior(zoo: Any, goal: str, env_id: str, method: str = "dagger", steps: int = 200_000, n_envs: int = 4,
                seed: int = 0, episodes: int = 100, replace: bool = False, consistency_rounds: int = 0,
-               consistency_steps: int = 20_000, command: str = "",
+               consistency_steps: int = 20_000, consistency_loop_uniform: float = 0.5, command: str = "",
                progress: Optional[Callable[[str], None]] = None, **dagger_kwargs: Any) -> tuple[Any, dict[str, Any]]:
     """
     Train a prior, add it to the zoo, and record its evaluation alone (greedy and sampled) on its card: what
@@ -257,6 +257,8 @@ def make_prior(zoo: Any, goal: str, env_id: str, method: str = "dagger", steps: 
         sampling where it loops, and is fitted to the loop-free paths of its episodes that reach the goal; the
         phase ``dopt consistency`` runs on a new policy), on env seeds ``seed + CONSISTENCY_SEED_OFFSET``; 0: none
     :param consistency_steps: Env steps per round of that phase
+    :param consistency_loop_uniform: In a loop, the phase draws from ``(1 - u) pi + u / n``: a prior imitating an
+        expert is sharp, and sampling from pi alone where it turns back and forth repeats the turn
     :param command: The command that made it, for the card
     :param progress: Called with a line of text as training goes (DAgger's rounds, the phase's rounds)
     :param dagger_kwargs: :func:`train_dagger`'s own settings (rounds, epochs, validation_episodes, ...)
@@ -273,9 +275,10 @@ def make_prior(zoo: Any, goal: str, env_id: str, method: str = "dagger", steps: 
         raise ValueError(f"the zoo already has a prior for {goal!r} in {env_id}; pass --replace to retrain it")
     if dagger_kwargs.get("validation_episodes", 0) < 0:
         raise ValueError(f"--validation-episodes must be >= 0, got {dagger_kwargs['validation_episodes']}")
-    if consistency_rounds < 0 or (consistency_rounds and consistency_steps < n_envs):
-        raise ValueError(f"--consistency-rounds must be >= 0 and --consistency-steps >= {n_envs} (one per env), got "
-                         f"{consistency_rounds} and {consistency_steps}")
+    if consistency_rounds < 0 or (consistency_rounds and consistency_steps < n_envs) or not 0 <= consistency_loop_uniform <= 1:
+        raise ValueError(f"--consistency-rounds must be >= 0, --consistency-steps >= {n_envs} (one per env) and "
+                         f"--consistency-loop-uniform in [0, 1], got {consistency_rounds}, {consistency_steps} and "
+                         f"{consistency_loop_uniform}")
     if consistency_rounds and method == "ppo":
         raise ValueError("the greedy-consistency phase refines an ACER policy (--method dagger or acer), not PPO")
     venv = make_vec(env_id, goal, n_envs=n_envs, seed=seed)
@@ -288,20 +291,20 @@ def make_prior(zoo: Any, goal: str, env_id: str, method: str = "dagger", steps: 
         model, record = train_rl(venv, method, steps, seed=seed, progress_bar=progress is not None)
     venv.close()
     if consistency_rounds:
-        record["consistency"] = refine_prior(model, env_id, goal, consistency_rounds, consistency_steps, n_envs, seed,
-                                             progress)
+        record["consistency"] = refine_prior(model, env_id, goal, consistency_rounds, consistency_steps,
+                                             consistency_loop_uniform, n_envs, seed, progress)
     with tempfile.TemporaryDirectory() as tmp:
         model.save(Path(tmp) / "model.zip")
         entry = zoo.add(Path(tmp) / "model.zip", goal, env_id, training=record, command=command, replace=replace)
     return record_evaluations(zoo, entry, episodes) if episodes else (entry, {})
 
 
-def refine_prior(model: ACER, env_id: str, goal: str, rounds: int, steps: int, n_envs: int = 4, seed: int = 0,
-                 progress: Optional[Callable[[str], None]] = None) -> dict[str, Any]:
+def refine_prior(model: ACER, env_id: str, goal: str, rounds: int, steps: int, loop_uniform: float = 0.5,
+                 n_envs: int = 4, seed: int = 0, progress: Optional[Callable[[str], None]] = None) -> dict[str, Any]:
     """
     The greedy-consistency phase (:func:`~sb3_disagree.acer.consistency.greedy_consistency`, three epochs a round)
     on a trained prior, in place, on env seeds ``seed + CONSISTENCY_SEED_OFFSET``, apart from its training, its
-    validation and its card's.
+    validation and its card's; in a loop it draws from ``(1 - loop_uniform) pi + loop_uniform / n``.
 
     :return: The phase's record for the card: its settings, seconds and per-round statistics
     """
@@ -316,11 +319,11 @@ def refine_prior(model: ACER, env_id: str, goal: str, rounds: int, steps: int, n
     env = make_vec(env_id, goal, n_envs=n_envs, seed=seed + CONSISTENCY_SEED_OFFSET)
     start = time.perf_counter()
     try:
-        history = greedy_consistency(model, env, rounds, steps, seed=seed, on_round=on_round)
+        history = greedy_consistency(model, env, rounds, steps, seed=seed, on_round=on_round, loop_uniform=loop_uniform)
     finally:
         env.close()
     model.policy.sync_averages()  # the average network follows the fitted one, as after DAgger
-    return {"rounds": rounds, "steps_per_round": steps, "seconds": round(time.perf_counter() - start, 1),
+    return {"rounds": rounds, "steps_per_round": steps, "loop_uniform": loop_uniform, "seconds": round(time.perf_counter() - start, 1),
             "per_round": [r.as_dict() for r in history]}
 
 
