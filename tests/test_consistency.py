@@ -15,8 +15,8 @@ from typer.testing import CliRunner
 from sb3_disagree import ACER
 from stable_baselines3.common.callbacks import BaseCallback
 
-from sb3_disagree.acer.consistency import (HarvestLabels, RoundStats, collect_escapes, greedy_consistency,
-                                          loop_free_labels)
+from sb3_disagree.acer.consistency import (HarvestLabels, RoundStats, _Rounds, collect_escapes,
+                                          greedy_consistency, loop_free_labels)
 from sb3_disagree.cli.app import app
 
 runner = CliRunner()
@@ -31,6 +31,19 @@ runner = CliRunner()
 ])
 def test_loop_free_labels_by_hand(keys, actions, expected):
     assert loop_free_labels(list(keys), actions) == expected
+
+
+def test_rounds_index_as_one_array():
+    rng = np.random.default_rng(0)
+    parts = [rng.integers(0, 255, (n, 2, 3), dtype=np.uint8) for n in (5, 1, 7)]
+    rounds = _Rounds()
+    for part in parts:
+        rounds.add(list(part))
+    rounds.add([])  # a round without labels adds nothing
+    whole = np.concatenate(parts)
+    index = rng.permutation(len(whole))
+    assert len(rounds) == 13 and np.array_equal(rounds[index], whole[index])
+    assert np.array_equal(rounds[np.array([12, 0, 5])], whole[[12, 0, 5]])
 
 
 def _spinning_model(frame_stack: int = 1) -> ACER:

@@ -11,7 +11,7 @@ env's success flag and frame identity.
 """
 
 from dataclasses import dataclass, field
-from typing import Any, Optional
+from typing import Any, Optional, Union
 
 import numpy as np
 import torch as th
@@ -91,6 +91,33 @@ class _Trails:
                 self.labels.actions.append(action)
 
 
+class _Rounds:
+    """The labels' inputs, one array per round, indexed as one array: each round is stacked once, instead of all
+    rounds again at each fit (twice their memory at the end; ten rounds of three-frame stacks are about 8 GB)."""
+
+    def __init__(self) -> None:
+        self.parts: list[np.ndarray] = []
+        self.ends = np.zeros(0, dtype=np.int64)
+
+    def add(self, inputs: list[np.ndarray]) -> None:
+        if inputs:
+            self.parts.append(np.stack(inputs))
+            self.ends = np.cumsum([len(part) for part in self.parts])
+
+    def __len__(self) -> int:
+        return int(self.ends[-1]) if len(self.ends) else 0
+
+    def __getitem__(self, index: np.ndarray) -> np.ndarray:
+        index = np.asarray(index)
+        part = np.searchsorted(self.ends, index, side="right")
+        starts = self.ends - [len(p) for p in self.parts]
+        out = np.empty((len(index), *self.parts[0].shape[1:]), dtype=self.parts[0].dtype)
+        for p in np.unique(part):
+            here = part == p
+            out[here] = self.parts[p][index[here] - starts[p]]
+        return out
+
+
 SAMPLING = ("loops", "always")  # where the collection samples instead of acting greedily
 
 
@@ -140,10 +167,12 @@ def collect_escapes(model: Any, env: VecEnv, steps: int, rng: np.random.Generato
                            "successes": trails.successes}
 
 
-def fit_labels(policy: Any, inputs: np.ndarray, actions: np.ndarray, epochs: int, learning_rate: float,
-               batch_size: int, rng: np.random.Generator) -> tuple[float, float]:
+def fit_labels(policy: Any, inputs: Union[np.ndarray, _Rounds], actions: np.ndarray, epochs: int,
+               learning_rate: float, batch_size: int, rng: np.random.Generator) -> tuple[float, float]:
     """
     Fit the policy's acting network (the moving average where one is kept) to ``actions`` by cross-entropy.
+
+    :param inputs: The network's inputs, an array or the rounds' arrays (indexed by an array of positions)
 
     :return: The last epoch's mean loss and accuracy (argmax equal to the label)
     """
@@ -201,11 +230,12 @@ def greedy_consistency(model: Any, env: Optional[VecEnv], rounds: int = 3, steps
                          f"envs, got {rounds}, {steps}, {epochs}")
     rng = np.random.default_rng(seed)
     trails = harvest.trails if harvest is not None else _Trails(0)
-    inputs, actions = list(trails.labels.inputs), list(trails.labels.actions)
+    inputs, actions = _Rounds(), list(trails.labels.actions)
+    inputs.add(trails.labels.inputs)
 
     def fit(env_steps: int, episodes: int, successes: int, labels: int) -> RoundStats:
-        loss, accuracy = (fit_labels(model.policy, np.stack(inputs), np.asarray(actions, dtype=np.int64), epochs,
-                                     learning_rate, batch_size, rng) if inputs else (float("nan"), float("nan")))
+        loss, accuracy = (fit_labels(model.policy, inputs, np.asarray(actions, dtype=np.int64), epochs,
+                                     learning_rate, batch_size, rng) if len(inputs) else (float("nan"), float("nan")))
         stats = RoundStats(env_steps, episodes, successes, labels, loss, accuracy)
         if on_round is not None:
             on_round(stats)
@@ -216,7 +246,7 @@ def greedy_consistency(model: Any, env: Optional[VecEnv], rounds: int = 3, steps
     history = []
     for _ in range(rounds):
         labels, counts = collect_escapes(model, env, steps, rng, sampling, loop_uniform)
-        inputs += labels.inputs
+        inputs.add(labels.inputs)
         actions += labels.actions
         history.append(fit(counts["env_steps"], counts["episodes"], counts["successes"], len(labels.actions)))
     return history
