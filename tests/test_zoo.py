@@ -129,6 +129,19 @@ def test_cli_add_show_eval_remove(zoo, model_files):
     assert result.exit_code == 0 and "stove" not in [e.goal for e in zoo.entries()]
 
 
+def test_an_added_prior_with_memory_shows_it_on_its_card_and_in_the_list(zoo, tmp_path):
+    # A model from outside has no training record; its memory is read off its policy for the card and the list.
+    path = tmp_path / "stacked.zip"
+    ACER("MlpPolicy", _state_env(), seed=0, policy_kwargs=dict(frame_stack=2)).save(path)
+    args = ["--zoo", str(zoo.root), "--env", STATE_ID]
+    result = runner.invoke(app, ["priors", "add", str(path), "--goal", "toaster", "--episodes", "0", "--replace", *args])
+    assert result.exit_code == 0, result.output
+    assert zoo.get("toaster", STATE_ID).card.training == {"frame_stack": 2, "loop_flags": False, "method": "external"}
+    assert zoo.get("bed", STATE_ID).card.training == {"method": "test", "steps": 0, "seed": 0}  # single frame: nothing added
+    rows = [line for line in runner.invoke(app, ["priors", "list", *args]).output.splitlines() if "toaster" in line]
+    assert rows and rows[0].split("│")[5].strip() == "2"
+
+
 def test_cli_eval_record_rewrites_only_the_evaluation(zoo):
     args = ["--zoo", str(zoo.root), "--env", STATE_ID]
     before = zoo.get("bed", STATE_ID)

@@ -36,6 +36,22 @@ DISTRIBUTION_CLASSES = {
 }
 
 
+def _memory_of(policy: Any) -> dict[str, Any]:
+    """
+    A policy's memory as a card's training record names it (``frame_stack``, ``loop_flags``), where it has one: a
+    model added from outside has no record of how it was made, and ``dopt priors list`` shows its memory from these.
+
+    :param policy: The loaded model's policy
+    :return: ``{}`` for a single-frame policy
+    """
+    from sb3_disagree.acer.torch_layers import LoopFlagsCNN
+
+    frame_stack = int(getattr(policy, "frame_stack", 1))
+    if frame_stack <= 1:
+        return {}
+    return {"frame_stack": frame_stack, "loop_flags": getattr(policy, "features_extractor_class", None) is LoopFlagsCNN}
+
+
 class ZooError(ValueError):
     """A zoo entry that cannot be used, with the reason."""
 
@@ -337,7 +353,8 @@ class Zoo:
         card = Card(
             goal=goal, env_id=env_id, env_kwargs=dict(env_kwargs or {}),
             observation_space=space_to_dict(model.observation_space), action_space=space_to_dict(model.action_space),
-            sb3_class=sb3_class, training=dict(training or {}), evaluation=dict(evaluation or {}),
+            sb3_class=sb3_class, training={**_memory_of(model.policy), **(training or {})},
+            evaluation=dict(evaluation or {}),
             sha256=sha256_of(model_path), created=_dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
             command=command,
         )
