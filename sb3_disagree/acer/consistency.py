@@ -98,11 +98,13 @@ class _Rounds:
     def __init__(self) -> None:
         self.parts: list[np.ndarray] = []
         self.ends = np.zeros(0, dtype=np.int64)
+        self.starts = np.zeros(0, dtype=np.int64)
 
     def add(self, inputs: list[np.ndarray]) -> None:
         if inputs:
             self.parts.append(np.stack(inputs))
             self.ends = np.cumsum([len(part) for part in self.parts])
+            self.starts = self.ends - [len(part) for part in self.parts]
 
     def __len__(self) -> int:
         return int(self.ends[-1]) if len(self.ends) else 0
@@ -110,11 +112,10 @@ class _Rounds:
     def __getitem__(self, index: np.ndarray) -> np.ndarray:
         index = np.asarray(index)
         part = np.searchsorted(self.ends, index, side="right")
-        starts = self.ends - [len(p) for p in self.parts]
         out = np.empty((len(index), *self.parts[0].shape[1:]), dtype=self.parts[0].dtype)
         for p in np.unique(part):
             here = part == p
-            out[here] = self.parts[p][index[here] - starts[p]]
+            out[here] = self.parts[p][index[here] - self.starts[p]]
         return out
 
 
@@ -150,9 +151,10 @@ def collect_escapes(model: Any, env: VecEnv, steps: int, rng: np.random.Generato
         actions = probs.argmax(-1)
         for i in range(n):
             key = obs[i].tobytes()
-            if sampling == "always" or key in seen[i]:  # a pose seen before: the greedy policy loops, so sample
+            looping = key in seen[i]  # a pose seen before: the greedy policy loops, so sample
+            if sampling == "always" or looping:
                 p = probs[i] / probs[i].sum()
-                if key in seen[i] and loop_uniform:
+                if looping and loop_uniform:
                     p = (1 - loop_uniform) * p + loop_uniform / len(p)
                 actions[i] = rng.choice(len(p), p=p)
             seen[i].add(key)

@@ -323,8 +323,8 @@ def refine_prior(model: ACER, env_id: str, goal: str, rounds: int, steps: int, l
     finally:
         env.close()
     model.policy.sync_averages()  # the average network follows the fitted one, as after DAgger
-    return {"rounds": rounds, "steps_per_round": steps, "loop_uniform": loop_uniform, "seconds": round(time.perf_counter() - start, 1),
-            "per_round": [r.as_dict() for r in history]}
+    return {"rounds": rounds, "steps_per_round": steps, "loop_uniform": loop_uniform,
+            "seconds": round(time.perf_counter() - start, 1), "per_round": [r.as_dict() for r in history]}
 
 
 def record_evaluations(zoo: Any, entry: Any, episodes: int,
