@@ -48,7 +48,7 @@ class LiveDisplay(BaseCallback):
 
 def _run_options() -> list:
     from sb3_disagree.run import RunConfig, train as run
-    from sb3_disagree.run.config import DOPT_TRAIN_FRAME_STACK, DOPT_TRAIN_HARVEST
+    from sb3_disagree.run.config import DOPT_TRAIN_FRAME_STACK, DOPT_TRAIN_HARVEST, DOPT_TRAIN_VALIDATION
 
     helps = {"steps": "Env steps to train (default 100000); with --resume, the run's new total (default: its saved "
                       "one)", "priors": "auto (the two nearest the goal in the embedding), or the priors' goals: a,b",
@@ -59,6 +59,9 @@ def _run_options() -> list:
                                             "weights, what model.zip acts with (default: off, the current weights)",
              "greedy_phase": "The last this many env steps act by the new policy's argmax, --greedy-epsilon of its "
                              "samples (default: the harvest's steps for a new --mode kickstart run, else 0)",
+             "consistency_validation": "Each greedy-consistency fit (the harvest's) is validated after every "
+                                       "epoch over this many greedy episodes and keeps its best epoch (default: "
+                                       f"{DOPT_TRAIN_VALIDATION} for --mode kickstart with a harvest, else 0 (off))",
              "frame_stack": "The new policy sees its last this many observations (its memory; default: "
                             f"{DOPT_TRAIN_FRAME_STACK} with --loop-flags, else 1)",
              "loop_flags": "The new policy's CNN sees the newest frame, and flags say whether it equals each older "
@@ -67,16 +70,18 @@ def _run_options() -> list:
     return [*options_of(RunConfig, skip=("acer_kwargs", "env_kwargs"),
                         types={"priors": str, "steps": Optional[int], "consistency_harvest": Optional[int],
                                "frame_stack": Optional[int], "loop_flags": Optional[bool],
-                               "greedy_phase": Optional[int]},
+                               "greedy_phase": Optional[int], "consistency_validation": Optional[int]},
                         flags={"env_id": "--env", "consistency_harvest_average":
                                "--consistency-harvest-average/--no-consistency-harvest-average",
                                "loop_flags": "--loop-flags/--no-loop-flags"}, helps=helps,
                         # dopt train overlaps the replay updates (faster on two cores); --no-overlap for the
                         # sequential loop the experiments use. It fits model.zip to the loop-free paths of its own
                         # last episodes, acted greedily by the current weights (DOPT_TRAIN_HARVEST); None: resolved in
-                        # train. Its new kickstarting runs see three frames, with loop flags (DOPT_TRAIN_FRAME_STACK).
+                        # train. Its new kickstarting runs see three frames, with loop flags (DOPT_TRAIN_FRAME_STACK),
+                        # and validate the harvest's fit epoch by epoch (DOPT_TRAIN_VALIDATION).
                         defaults={"overlap": True, "steps": None, "consistency_harvest": None,
-                                  "frame_stack": None, "loop_flags": None, "greedy_phase": None}),
+                                  "frame_stack": None, "loop_flags": None, "greedy_phase": None,
+                                  "consistency_validation": None}),
             *options_of(run, only=("out", "resume", "force"), types={"resume": Optional[Path], "out": Path}),
             *options_of(_cli_only)]
 
@@ -133,18 +138,22 @@ def train(**options) -> None:
 def _default_harvest(options: dict, resume: Optional[Path], budget: int) -> None:
     """dopt train's harvest where none is given: ``DOPT_TRAIN_HARVEST`` for a new run of the default mode
     (kickstarting, where it was measured), acted greedily: a new kickstarting run's harvest, whatever its length, is
-    a greedy phase too unless ``--greedy-phase`` says otherwise. None for the other modes, and none asked of a
-    resumed run (it keeps its saved settings).
+    a greedy phase too unless ``--greedy-phase`` says otherwise, and its fits are validated
+    (``DOPT_TRAIN_VALIDATION`` episodes) where there is a fit. None for the other modes, and none asked of a resumed
+    run (it keeps its saved settings).
 
     :param budget: The run's env steps (a harvest longer than the budget is acted greedily throughout)
     """
-    from sb3_disagree.run.config import DOPT_TRAIN_HARVEST
+    from sb3_disagree.run.config import DOPT_TRAIN_HARVEST, DOPT_TRAIN_VALIDATION
 
     new_kickstart = resume is None and options["mode"] == "kickstart"
     if options["consistency_harvest"] is None:
         options["consistency_harvest"] = DOPT_TRAIN_HARVEST if new_kickstart else 0
     if options["greedy_phase"] is None:
         options["greedy_phase"] = min(options["consistency_harvest"], budget) if new_kickstart else 0
+    if options["consistency_validation"] is None:
+        fitted = options["consistency_harvest"] or options["consistency_rounds"]
+        options["consistency_validation"] = DOPT_TRAIN_VALIDATION if new_kickstart and fitted else 0
 
 
 def _default_memory(options: dict, resume: Optional[Path]) -> None:
@@ -164,8 +173,10 @@ def _default_memory(options: dict, resume: Optional[Path]) -> None:
 
 def _show_round(r) -> None:
     where = f"a round: {r.env_steps:,} env steps" if r.env_steps else "the training's last episodes"
+    kept = (f"; validated greedy {', '.join(f'{v:.2f}' for v in r.validation)} after each epoch, kept epoch {r.epoch}"
+            if r.validation else "")
     console.print(f"greedy consistency, {where}, {r.successes}/{r.episodes} episodes "
-                  f"reached the goal, {r.labels:,} labels; fit loss {r.loss:.3f}, accuracy {r.accuracy:.2f}")
+                  f"reached the goal, {r.labels:,} labels; fit loss {r.loss:.3f}, accuracy {r.accuracy:.2f}{kept}")
 
 
 def _priors(text: str):

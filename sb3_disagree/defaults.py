@@ -10,3 +10,5 @@ FINAL_EVAL_SEED_OFFSET = 20_000  # the evaluation after a run (result.json, the 
 PRIOR_CARD_SEED = 10_000  # a prior's evaluation on its card
 PRIOR_VALIDATION_SEED = 20_000  # DAgger's per-round validation of a prior
 CONSISTENCY_SEED_OFFSET = 30_000  # the greedy-consistency phase after a run (dopt consistency): seed + 30 000
+VALIDATION_SEED_OFFSET = 40_000  # the validation of the greedy-consistency fits (consistency_validation)
+VALIDATION_MAX_STEPS = 200  # a validation episode not at the goal by then fails (a greedy success takes ~80)

@@ -15,8 +15,8 @@ from typer.testing import CliRunner
 from sb3_disagree import ACER
 from stable_baselines3.common.callbacks import BaseCallback
 
-from sb3_disagree.acer.consistency import (HarvestLabels, RoundStats, _Rounds, collect_escapes,
-                                          greedy_consistency, loop_free_labels)
+from sb3_disagree.acer.consistency import (HarvestLabels, RoundStats, _Rounds, collect_escapes, fit_best_epoch,
+                                          fit_labels, greedy_consistency, loop_free_labels)
 from sb3_disagree.cli.app import app
 
 runner = CliRunner()
@@ -146,6 +146,30 @@ def test_harvest_keeps_the_loop_free_paths_of_training_episodes_after_its_start(
     assert len(majority) >= 5 and (_probs(model, obs).argmax(1) == np.array(list(majority.values()))).all()
 
 
+@pytest.mark.parametrize("scores, kept", [
+    ([(0.5, 10.0), (0.9, 10.0), (0.7, 10.0)], 2),  # the best success
+    ([(0.9, 20.0), (0.9, 10.0), (0.5, 1.0)], 2),  # a tie: the shorter episodes
+    ([(0.9, 10.0), (0.9, 10.0), (0.9, 10.0)], 1),  # a full tie: the earliest
+    ([(0.1, 10.0), (0.2, 10.0), (0.3, 10.0)], 3),  # rising: the last, as the unvalidated fit
+])
+def test_the_validated_fit_keeps_the_weights_of_its_best_epoch(scores, kept):
+    model = _spinning_model()
+    rng = np.random.default_rng(0)
+    inputs = rng.uniform(-1, 1, (300, *model.policy.net_observation_space.shape)).astype(np.float32)
+    actions = rng.integers(0, 3, 300)
+    start = {k: v.clone() for k, v in model.policy.acting_net.state_dict().items()}
+    calls = iter(scores)
+    epoch, loss, accuracy, validation = fit_best_epoch(model.policy, inputs, actions, 3, 1e-2, 32,
+                                                       np.random.default_rng(7), lambda: next(calls))
+    assert epoch == kept and validation == [s for s, _ in scores]
+    fitted = _probs(model, inputs)
+    # The same fit stopped after the kept epoch: the same minibatches in the same order, so the same weights.
+    model.policy.acting_net.load_state_dict(start)
+    expected = fit_labels(model.policy, inputs, actions, kept, 1e-2, 32, np.random.default_rng(7))
+    assert (loss, accuracy) == pytest.approx(expected)
+    np.testing.assert_allclose(fitted, _probs(model, inputs), atol=1e-6)
+
+
 def test_phase_refuses_bad_settings():
     with pytest.raises(ValueError, match="rounds and epochs"):
         greedy_consistency(_spinning_model(), make_vec_env(TurnEnv, n_envs=4), rounds=0)
@@ -184,7 +208,7 @@ def test_dopt_consistency_writes_beside_the_run_and_never_over_it(tmp_path):
 
 def test_dopt_train_refines_model_zip_when_asked_and_resume_keeps_it(tmp_path, monkeypatch):
     # The phase's learning is tested above; here what dopt train does with it, on a phase that shifts the logits.
-    def shifting_phase(model, env, rounds, steps, epochs=3, seed=0, on_round=None, harvest=None):
+    def shifting_phase(model, env, rounds, steps, epochs=3, seed=0, on_round=None, harvest=None, validate=None):
         with th.no_grad():
             for p in model.policy.acting_net.parameters():
                 p.add_(0.1)
@@ -226,7 +250,7 @@ def test_an_interrupted_phase_leaves_the_trained_model_and_resume_redoes_it(tmp_
     module = sys.modules["sb3_disagree.run.train"]
     calls = []
 
-    def interrupted(model, env, rounds, steps, epochs=3, seed=0, on_round=None, harvest=None):
+    def interrupted(model, env, rounds, steps, epochs=3, seed=0, on_round=None, harvest=None, validate=None):
         calls.append("interrupted")
         raise KeyboardInterrupt
 
@@ -241,7 +265,7 @@ def test_an_interrupted_phase_leaves_the_trained_model_and_resume_redoes_it(tmp_
     (checkpoint,) = (run_dir / "checkpoints").iterdir()
     assert (checkpoint / "model.zip").read_bytes() == (run_dir / "model.zip").read_bytes()  # the trained policy
 
-    def phase(model, env, rounds, steps, epochs=3, seed=0, on_round=None, harvest=None):
+    def phase(model, env, rounds, steps, epochs=3, seed=0, on_round=None, harvest=None, validate=None):
         calls.append("done")
         return [RoundStats(steps, 1, 1, 1, 0.0, 1.0)]
 
@@ -278,6 +302,44 @@ def test_dopt_train_fits_model_zip_to_the_harvest_of_its_own_episodes(tmp_path):
     obs = np.random.default_rng(0).uniform(-1, 1, (64, 4)).astype(np.float32)
     changed = not np.allclose(_probs(trained, obs), _probs(refined, obs), atol=1e-4)
     assert changed == (phase["harvest"]["labels"] > 0)
+
+
+def test_dopt_train_validates_the_harvest_fit_epoch_by_epoch(tmp_path):
+    base = ["train", "--goal", "bathtub", "--env", "sb3_disagree/ApartmentState-v0", "--mode", "scratch", "--steps",
+            "600", "--n-envs", "2", "--card-episodes", "0", "--out", str(tmp_path)]
+    for bad in (["--consistency-harvest", "600", "--consistency-validation", "-1"],
+                ["--consistency-validation", "4"]):  # nothing to validate without a fit
+        result = runner.invoke(app, [*base, *bad])
+        assert result.exit_code == 2 and "--consistency-validation" in result.output and not list(tmp_path.iterdir())
+    result = runner.invoke(app, [*base, "--consistency-harvest", "600", "--consistency-validation", "4",
+                                 "--consistency-epochs", "2"])
+    assert result.exit_code == 0, result.output
+    (run_dir,) = tmp_path.glob("*/bathtub/scratch-0")
+    saved = yaml.safe_load((run_dir / "config.yaml").read_text())
+    (fit,) = saved["consistency"]["per_round"]
+    assert saved["consistency_validation"] == 4
+    if saved["consistency"]["harvest"]["labels"]:
+        assert len(fit["validation"]) == 2 and fit["epoch"] in (1, 2) and "kept epoch" in result.output
+        assert fit["validation"][int(fit["epoch"]) - 1] == max(fit["validation"])
+    else:  # no episode reached the goal: nothing was fitted, nothing validated
+        assert "validation" not in fit
+
+
+@pytest.mark.parametrize("args, expected", [
+    (dict(mode="kickstart", consistency_harvest=None, consistency_rounds=0), 40),  # dopt train's default
+    (dict(mode="kickstart", consistency_harvest=0, consistency_rounds=0), 0),  # no fit, nothing to validate
+    (dict(mode="kickstart", consistency_harvest=0, consistency_rounds=2), 40),
+    (dict(mode="disagreement", consistency_harvest=None, consistency_rounds=0), 0),
+])
+def test_dopt_train_validates_new_kickstarting_runs_by_default(args, expected):
+    from sb3_disagree.cli.train import _default_harvest
+
+    options = dict(args, greedy_phase=None, consistency_validation=None)
+    _default_harvest(options, None, 100_000)
+    assert options["consistency_validation"] == expected
+    options = dict(args, greedy_phase=None, consistency_validation=None)
+    _default_harvest(options, "a run", 100_000)  # a resumed run keeps its saved settings
+    assert options["consistency_validation"] == 0
 
 
 class _RecordProbs(BaseCallback):

@@ -10,6 +10,8 @@ aggregated over rounds (as DAgger aggregates its labels). No prior, expert or ma
 env's success flag and frame identity.
 """
 
+import copy
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any, Optional, Union
 
@@ -59,9 +61,12 @@ class RoundStats:
     labels: int
     loss: float
     accuracy: float
+    epoch: int = 0  # with a validation, the epoch whose weights were kept (its loss and accuracy above); 0: the last
+    validation: list[float] = field(default_factory=list)  # greedy validation success after each epoch
 
-    def as_dict(self) -> dict[str, float]:
-        return {k: float(v) for k, v in self.__dict__.items()}
+    def as_dict(self) -> dict[str, Any]:
+        return {k: [float(x) for x in v] if isinstance(v, list) else float(v) for k, v in self.__dict__.items()
+                if k not in ("epoch", "validation") or self.validation}
 
 
 @dataclass
@@ -170,12 +175,13 @@ def collect_escapes(model: Any, env: VecEnv, steps: int, rng: np.random.Generato
 
 
 def fit_labels(policy: Any, inputs: Union[np.ndarray, _Rounds], actions: np.ndarray, epochs: int,
-               learning_rate: float, batch_size: int, rng: np.random.Generator) -> tuple[float, float]:
+               learning_rate: float, batch_size: int, rng: np.random.Generator,
+               on_epoch: Optional[Callable[[int, float, float], None]] = None) -> tuple[float, float]:
     """
     Fit the policy's acting network (the moving average where one is kept) to ``actions`` by cross-entropy.
 
     :param inputs: The network's inputs, an array or the rounds' arrays (indexed by an array of positions)
-
+    :param on_epoch: Called after each epoch with its number (from 1), mean loss and accuracy
     :return: The last epoch's mean loss and accuracy (argmax equal to the label)
     """
     net = policy.acting_net
@@ -183,7 +189,7 @@ def fit_labels(policy: Any, inputs: Union[np.ndarray, _Rounds], actions: np.ndar
     optimizer = th.optim.Adam(net.parameters(), lr=learning_rate)
     loss_sum = correct = 0.0
     try:
-        for _ in range(epochs):
+        for epoch in range(1, epochs + 1):
             loss_sum = correct = 0.0
             for batch in np.array_split(rng.permutation(len(inputs)), max(len(inputs) // batch_size, 1)):
                 x = th.as_tensor(inputs[batch], device=policy.device)
@@ -195,16 +201,45 @@ def fit_labels(policy: Any, inputs: Union[np.ndarray, _Rounds], actions: np.ndar
                 optimizer.step()
                 loss_sum += loss.item() * len(batch)
                 correct += (logits.argmax(-1) == y).sum().item()
+            if on_epoch is not None:
+                on_epoch(epoch, loss_sum / max(len(inputs), 1), correct / max(len(inputs), 1))
     finally:
         if net is not policy.net:  # the moving average is not trained by gradient elsewhere
             net.requires_grad_(False)
     return loss_sum / max(len(inputs), 1), correct / max(len(inputs), 1)
 
 
+def fit_best_epoch(policy: Any, inputs: Union[np.ndarray, _Rounds], actions: np.ndarray, epochs: int,
+                   learning_rate: float, batch_size: int, rng: np.random.Generator,
+                   validate: Callable[[], tuple[float, float]]) -> tuple[int, float, float, list[float]]:
+    """
+    :func:`fit_labels`, validated after every epoch, keeping the weights of the epoch with the highest greedy
+    validation success (ties: the shorter mean episode, then the earlier epoch). A greedy policy's success is a
+    fragile function of its weights: one more epoch on the same labels can move it by 0.17 (docs/method.md).
+
+    :param validate: The acting network's greedy success and mean episode length on validation episodes
+    :return: The kept epoch, its loss and accuracy, and every epoch's validation success
+    """
+    net, best, scores = policy.acting_net, None, []
+
+    def on_epoch(epoch: int, loss: float, accuracy: float) -> None:
+        nonlocal best
+        success, length = validate()
+        scores.append(success)
+        if best is None or (success, -length) > best[0]:
+            best = ((success, -length), epoch, loss, accuracy, copy.deepcopy(net.state_dict()))
+
+    fit_labels(policy, inputs, actions, epochs, learning_rate, batch_size, rng, on_epoch)
+    _, epoch, loss, accuracy, weights = best
+    net.load_state_dict(weights)
+    return epoch, loss, accuracy, scores
+
+
 def greedy_consistency(model: Any, env: Optional[VecEnv], rounds: int = 3, steps: int = 20_000, epochs: int = 3,
                        learning_rate: float = 3e-4, batch_size: int = 128, seed: int = 0,
                        on_round: Optional[Any] = None, sampling: str = "loops", loop_uniform: float = 0.0,
-                       harvest: Optional["HarvestLabels"] = None) -> list[RoundStats]:
+                       harvest: Optional["HarvestLabels"] = None,
+                       validate: Optional[Callable[[], tuple[float, float]]] = None) -> list[RoundStats]:
     """
     The greedy-consistency phase: ``rounds`` times, collect ``steps`` env steps acting greedily (sampling only
     in loops), add the loop-free labels of the successful episodes to those of earlier rounds, and fit the acting
@@ -225,6 +260,8 @@ def greedy_consistency(model: Any, env: Optional[VecEnv], rounds: int = 3, steps
     :param loop_uniform: In a loop, the share of the uniform distribution in the sampled one (see
         :func:`collect_escapes`)
     :param harvest: The labels a :class:`HarvestLabels` kept during training
+    :param validate: The acting network's greedy success and mean episode length on validation episodes; with it,
+        each fit keeps the weights of its epoch that validates best (:func:`fit_best_epoch`)
     :return: Each round's statistics (with ``rounds`` 0, the harvest's fit: its episodes, 0 env steps)
     """
     if rounds < (0 if harvest is not None else 1) or epochs < 1 or (rounds and steps < env.num_envs):
@@ -236,9 +273,14 @@ def greedy_consistency(model: Any, env: Optional[VecEnv], rounds: int = 3, steps
     inputs.add(trails.labels.inputs)
 
     def fit(env_steps: int, episodes: int, successes: int, labels: int) -> RoundStats:
-        loss, accuracy = (fit_labels(model.policy, inputs, np.asarray(actions, dtype=np.int64), epochs,
-                                     learning_rate, batch_size, rng) if len(inputs) else (float("nan"), float("nan")))
-        stats = RoundStats(env_steps, episodes, successes, labels, loss, accuracy)
+        stats = RoundStats(env_steps, episodes, successes, labels, float("nan"), float("nan"))
+        if len(inputs) and validate is not None:
+            stats.epoch, stats.loss, stats.accuracy, stats.validation = fit_best_epoch(
+                model.policy, inputs, np.asarray(actions, dtype=np.int64), epochs, learning_rate, batch_size, rng,
+                validate)
+        elif len(inputs):
+            stats.loss, stats.accuracy = fit_labels(model.policy, inputs, np.asarray(actions, dtype=np.int64), epochs,
+                                                    learning_rate, batch_size, rng)
         if on_round is not None:
             on_round(stats)
         return stats

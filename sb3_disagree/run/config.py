@@ -35,6 +35,10 @@ DOPT_TRAIN_HARVEST = 30_000
 # (LoopFlagsCNN). Over five seeds a task at 100k, with the harvest, the policy alone went from 0.77
 # to 0.93 greedy on bathtub and from 0.61 to 0.86 on nightstand, sampled 1.00 and 0.99 (docs/results.md, "Loop flags").
 DOPT_TRAIN_FRAME_STACK = 3
+# dopt train's consistency_validation for a new kickstarting run: the harvest's fit keeps, of its epochs, the one whose
+# greedy success over this many validation episodes is highest. One more epoch on the same labels moved a run's
+# greedy success from 0.92 to 0.75 (docs/method.md, "A validated fit").
+DOPT_TRAIN_VALIDATION = 40
 
 
 def acer_defaults(mode: str) -> dict[str, Any]:
@@ -107,6 +111,10 @@ class RunConfig:
     :param consistency_harvest_frozen: Over the harvest ACER makes no update: its paths come from the one policy
         the fit starts from, and its env steps cost no update
     :param consistency_epochs: Passes over the labels in each fit of the phase (and in the harvest's fit)
+    :param consistency_validation: Each fit of the phase (and the harvest's) is validated after every epoch, the new
+        policy acting greedily for this many episodes (env seeds of their own, cut at ``VALIDATION_MAX_STEPS``), and
+        keeps the weights of the epoch that validates best (0: none, the last epoch's; dopt train:
+        ``DOPT_TRAIN_VALIDATION`` for mode kickstart)
     """
 
     goal: str
@@ -141,6 +149,7 @@ class RunConfig:
     consistency_harvest_average: bool = False
     consistency_harvest_frozen: bool = False
     consistency_epochs: int = 3
+    consistency_validation: int = 0
 
     def __post_init__(self) -> None:
         if isinstance(self.acer_kwargs, dict) and isinstance(self.mode, str):  # anything else: validate() says so
@@ -195,6 +204,11 @@ class RunConfig:
             raise ValueError(f"--consistency-epochs must be >= 1, got {self.consistency_epochs}")
         if self.consistency_harvest < 0:
             raise ValueError(f"--consistency-harvest must be >= 0, got {self.consistency_harvest}")
+        if self.consistency_validation < 0:
+            raise ValueError(f"--consistency-validation must be >= 0, got {self.consistency_validation}")
+        if self.consistency_validation and not (self.consistency_rounds or self.consistency_harvest):
+            raise ValueError("--consistency-validation validates the greedy-consistency fits: give "
+                             "--consistency-harvest or --consistency-rounds too")
         if self.consistency_harvest_average and not self.consistency_harvest:
             raise ValueError("--consistency-harvest-average acts by the average over a harvest: give "
                              "--consistency-harvest too")

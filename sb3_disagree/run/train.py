@@ -161,20 +161,23 @@ def _refine(config: RunConfig, run_dir: Path, model: ACER, saved_config: dict,
     checkpoint, which a resumed run continues from) and ``config.yaml`` records the phase. An interrupted phase
     leaves the trained ``model.zip``; ``--resume`` redoes it (with no harvest: the training is over).
     """
-    from sb3_disagree.run.consistency import consistency_env
+    from sb3_disagree.run.consistency import consistency_env, greedy_validation
 
     env = consistency_env(saved_config) if config.consistency_rounds else None
+    validate, validation_env = (greedy_validation(model, saved_config, config.consistency_validation)
+                                if config.consistency_validation else (None, None))
     start = time.perf_counter()
     try:
         with sigterm_as_interrupt():
             history = greedy_consistency(model, env, config.consistency_rounds, config.consistency_steps,
                                          config.consistency_epochs, seed=config.seed, on_round=on_round,
-                                         harvest=harvest)
+                                         harvest=harvest, validate=validate)
     except KeyboardInterrupt:  # the weights are half fitted: hand back the trained policy that model.zip holds
         return _load(config, run_dir / "model.zip", run_dir), False
     finally:
-        if env is not None:
-            env.close()
+        for opened in (env, validation_env):
+            if opened is not None:
+                opened.close()
     with sigterm_as_interrupt():
         replace_model(model, run_dir)
         saved_config["consistency"] = {"num_timesteps": int(model.num_timesteps),
