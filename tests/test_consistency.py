@@ -325,23 +325,6 @@ def test_dopt_train_validates_the_harvest_fit_epoch_by_epoch(tmp_path):
         assert "validation" not in fit
 
 
-@pytest.mark.parametrize("args, expected", [
-    (dict(mode="kickstart", consistency_harvest=None, consistency_rounds=0), 40),  # dopt train's default
-    (dict(mode="kickstart", consistency_harvest=0, consistency_rounds=0), 0),  # no fit, nothing to validate
-    (dict(mode="kickstart", consistency_harvest=0, consistency_rounds=2), 40),
-    (dict(mode="disagreement", consistency_harvest=None, consistency_rounds=0), 0),
-])
-def test_dopt_train_validates_new_kickstarting_runs_by_default(args, expected):
-    from sb3_disagree.cli.train import _default_harvest
-
-    options = dict(args, greedy_phase=None, consistency_validation=None)
-    _default_harvest(options, None, 100_000)
-    assert options["consistency_validation"] == expected
-    options = dict(args, greedy_phase=None, consistency_validation=None)
-    _default_harvest(options, "a run", 100_000)  # a resumed run keeps its saved settings
-    assert options["consistency_validation"] == 0
-
-
 class _RecordProbs(BaseCallback):
     """Per step: the behaviour's probabilities, and those of the current and the averaged weights on its input."""
 

@@ -44,6 +44,7 @@ def test_train_writes_the_run_folder(zoo, tmp_path, mode):
     # dopt train's default harvest (all 400 steps here), acted greedily by the current weights: kickstarting only
     assert (cfg["consistency_harvest"], cfg["consistency_harvest_average"], cfg["greedy_phase"]) == (
         (30_000, False, 400) if mode == "kickstart" else (0, False, 0))
+    assert cfg["consistency_validation"] == (40 if mode == "kickstart" else 0)  # the harvest's fit, validated
     assert ("harvest" in (cfg.get("consistency") or {})) == (mode == "kickstart")
     assert (cfg["frame_stack"], cfg["loop_flags"]) == (1, False)  # state observations: no frames to compare
     if mode == "finetune":  # started from the nearest prior: its policy head, a Q head of its own
@@ -77,21 +78,24 @@ def test_the_default_harvest_gives_way_to_the_options_given(zoo, tmp_path):
 
 
 @pytest.mark.parametrize("given,mode,resume,expected", [
-    ({}, "kickstart", None, (30_000, 30_000)),  # dopt train's default: the harvest acted greedily
-    ({"steps": 20_000}, "kickstart", None, (30_000, 20_000)),  # a harvest past the budget: all of it greedy
-    ({"consistency_harvest": 200}, "kickstart", None, (200, 200)),  # the harvest asked for, acted greedily
-    ({"consistency_harvest": 0}, "kickstart", None, (0, 0)),  # no harvest, no greedy phase
-    ({"greedy_phase": 0}, "kickstart", None, (30_000, 0)),  # a harvest sampled as training samples
-    ({"greedy_phase": 5_000}, "kickstart", None, (30_000, 5_000)),
-    ({}, "disagreement", None, (0, 0)),  # not measured there
-    ({}, "kickstart", "RUN", (0, 0)),  # a resumed run keeps its saved settings
+    ({}, "kickstart", None, (30_000, 30_000, 40)),  # dopt train's default: the harvest acted greedily, validated
+    ({"steps": 20_000}, "kickstart", None, (30_000, 20_000, 40)),  # a harvest past the budget: all of it greedy
+    ({"consistency_harvest": 200}, "kickstart", None, (200, 200, 40)),  # the harvest asked for, acted greedily
+    ({"consistency_harvest": 0}, "kickstart", None, (0, 0, 0)),  # no harvest, no greedy phase, no fit to validate
+    ({"consistency_harvest": 0, "consistency_rounds": 2}, "kickstart", None, (0, 0, 40)),  # the rounds' fits
+    ({"greedy_phase": 0}, "kickstart", None, (30_000, 0, 40)),  # a harvest sampled as training samples
+    ({"greedy_phase": 5_000}, "kickstart", None, (30_000, 5_000, 40)),
+    ({"consistency_validation": 0}, "kickstart", None, (30_000, 30_000, 0)),  # the last epoch's weights
+    ({}, "disagreement", None, (0, 0, 0)),  # not measured there
+    ({}, "kickstart", "RUN", (0, 0, 0)),  # a resumed run keeps its saved settings
 ])
 def test_the_default_harvest_gives_way_to_the_options_given_each(given, mode, resume, expected):
     from sb3_disagree.cli.train import _default_harvest
 
-    options = {"consistency_harvest": None, "greedy_phase": None, "mode": mode, **given}
+    options = {"consistency_harvest": None, "greedy_phase": None, "consistency_validation": None,
+               "consistency_rounds": 0, "mode": mode, **given}
     _default_harvest(options, resume, options.pop("steps", 100_000))
-    assert (options["consistency_harvest"], options["greedy_phase"]) == expected
+    assert (options["consistency_harvest"], options["greedy_phase"], options["consistency_validation"]) == expected
 
 
 @pytest.mark.parametrize("given,env,mode,resume,expected", [
