@@ -274,13 +274,13 @@ def greedy_consistency(model: Any, env: Optional[VecEnv], rounds: int = 3, steps
 
     def fit(env_steps: int, episodes: int, successes: int, labels: int) -> RoundStats:
         stats = RoundStats(env_steps, episodes, successes, labels, float("nan"), float("nan"))
-        if len(inputs) and validate is not None:
-            stats.epoch, stats.loss, stats.accuracy, stats.validation = fit_best_epoch(
-                model.policy, inputs, np.asarray(actions, dtype=np.int64), epochs, learning_rate, batch_size, rng,
-                validate)
-        elif len(inputs):
-            stats.loss, stats.accuracy = fit_labels(model.policy, inputs, np.asarray(actions, dtype=np.int64), epochs,
-                                                    learning_rate, batch_size, rng)
+        if len(inputs):
+            fit_args = (model.policy, inputs, np.asarray(actions, dtype=np.int64), epochs, learning_rate, batch_size,
+                        rng)
+            if validate is None:
+                stats.loss, stats.accuracy = fit_labels(*fit_args)
+            else:
+                stats.epoch, stats.loss, stats.accuracy, stats.validation = fit_best_epoch(*fit_args, validate)
         if on_round is not None:
             on_round(stats)
         return stats

@@ -10,9 +10,8 @@ from sb3_disagree.acer import ACER
 from sb3_disagree.acer.consistency import RoundStats, greedy_consistency
 from sb3_disagree.defaults import CONSISTENCY_SEED_OFFSET, VALIDATION_MAX_STEPS, VALIDATION_SEED_OFFSET
 from sb3_disagree.envs.vec import make_vec
-from sb3_disagree.evaluation import evaluate
 from sb3_disagree.files import write_atomic
-from sb3_disagree.run.evaluation import evaluate_both, load_run
+from sb3_disagree.run.evaluation import evaluate_alone, evaluate_both, load_run
 
 FOLDER = "consistent"  # inside the run: model.zip and result.json of the refined policy
 
@@ -24,26 +23,21 @@ def consistency_env(config: dict[str, Any]) -> Any:
                     seed=config.get("seed", 0) + CONSISTENCY_SEED_OFFSET)
 
 
-def greedy_validation(model: Any, config: dict[str, Any], episodes: int) -> tuple[Callable[[], tuple[float, float]],
-                                                                                  Any]:
+def greedy_validation(model: Any, config: dict[str, Any], episodes: int) -> Callable[[], tuple[float, float]]:
     """
     The validation of the phase's fits: the model's greedy success and mean episode length over ``episodes``
-    episodes of the run's task, from the same starts each time (env seeds: the run's seed +
+    episodes of the run's task, from the same starts each time (fresh envs seeded from the run's seed +
     ``VALIDATION_SEED_OFFSET``, apart from its training, phase and evaluation seeds), each episode cut at
     ``VALIDATION_MAX_STEPS`` (a greedy success takes about 80 steps; a loop would cost 500 at each validation).
-
-    :return: The validation, and its envs (to close)
     """
-    kwargs = {**(config.get("env_kwargs") or {}), "max_episode_steps": VALIDATION_MAX_STEPS}
+    cut = {**config, "env_kwargs": {**(config.get("env_kwargs") or {}), "max_episode_steps": VALIDATION_MAX_STEPS}}
     seed = config.get("seed", 0) + VALIDATION_SEED_OFFSET
-    env = make_vec(config["env_id"], config["goal"], kwargs, n_envs=4, seed=seed)
 
     def validate() -> tuple[float, float]:
-        env.seed(seed)  # the same starts for every epoch: the epochs are compared on one set of episodes
-        result = evaluate(model, env, episodes, deterministic=True)
+        result = evaluate_alone(model, cut, episodes, True, seed)
         return result.success_rate, result.mean_length
 
-    return validate, env
+    return validate
 
 
 def refine_run(run_dir: Path, rounds: int = 3, steps: int = 20_000, epochs: int = 3, learning_rate: float = 3e-4,

@@ -164,8 +164,8 @@ def _refine(config: RunConfig, run_dir: Path, model: ACER, saved_config: dict,
     from sb3_disagree.run.consistency import consistency_env, greedy_validation
 
     env = consistency_env(saved_config) if config.consistency_rounds else None
-    validate, validation_env = (greedy_validation(model, saved_config, config.consistency_validation)
-                                if config.consistency_validation else (None, None))
+    validate = (greedy_validation(model, saved_config, config.consistency_validation)
+                if config.consistency_validation else None)
     start = time.perf_counter()
     try:
         with sigterm_as_interrupt():
@@ -175,9 +175,8 @@ def _refine(config: RunConfig, run_dir: Path, model: ACER, saved_config: dict,
     except KeyboardInterrupt:  # the weights are half fitted: hand back the trained policy that model.zip holds
         return _load(config, run_dir / "model.zip", run_dir), False
     finally:
-        for opened in (env, validation_env):
-            if opened is not None:
-                opened.close()
+        if env is not None:
+            env.close()
     with sigterm_as_interrupt():
         replace_model(model, run_dir)
         saved_config["consistency"] = {"num_timesteps": int(model.num_timesteps),
