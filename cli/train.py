@@ -48,11 +48,10 @@ class LiveDisplay(BaseCallback):
 
 def _run_options() -> list:
     from sb3_disagree.run import RunConfig, train as run
-    from sb3_disagree.run.config import (DOPT_TRAIN_FRAME_STACK, DOPT_TRAIN_HARVEST, DOPT_TRAIN_STEPS,
-                                         DOPT_TRAIN_VALIDATION)
+    from sb3_disagree.run.config import DOPT_TRAIN_FRAME_STACK, DOPT_TRAIN_HARVEST, DOPT_TRAIN_VALIDATION
 
-    helps = {"steps": f"Env steps to train (default {DOPT_TRAIN_STEPS} for --mode kickstart, else 100000); with "
-                      "--resume, the run's new total (default: its saved one)", "priors": "auto (the two nearest the goal in the embedding), or the priors' goals: a,b",
+    helps = {"steps": "Env steps to train (default 100000); with --resume, the run's new total (default: its saved "
+                      "one)", "priors": "auto (the two nearest the goal in the embedding), or the priors' goals: a,b",
              "consistency_harvest": "model.zip is fitted to the loop-free paths of the successful episodes of the "
                                     f"last this many training steps, no env step more (default: {DOPT_TRAIN_HARVEST} for "
                                     "--mode kickstart, 0 (off) for the others)",
@@ -120,7 +119,7 @@ def train(**options) -> None:
         options["acer_kwargs"] = {k: v for k in ("reward_scale", "ema_decay") if (v := options.pop(k)) is not None}
         options["env_kwargs"] = {k: v for k in ("collision_penalty", "reward_distance") if (v := options.pop(k)) is not None}
         steps = options["steps"]
-        budget = steps or default_budget(options["mode"])
+        budget = steps or 100_000
         _default_harvest(options, resume, budget)
         _default_memory(options, resume)
         config = RunConfig(**{**options, "steps": budget, "priors": _priors(options["priors"])})
@@ -134,14 +133,6 @@ def train(**options) -> None:
             console.print(f"evaluating the new policy alone for its card ({card_episodes} episodes each way)")
         _show_evaluations(write_card(run_dir, model, card_episodes if finished else 0, command_line()))
         _show_end(run_dir, model, finished, config.goal)
-
-
-def default_budget(mode: str) -> int:
-    """dopt train's env steps where none are given: ``DOPT_TRAIN_STEPS`` for the default mode (kickstarting, where
-    it was measured), 100k (``RunConfig``'s) for the others."""
-    from sb3_disagree.run.config import DOPT_TRAIN_STEPS, RunConfig
-
-    return DOPT_TRAIN_STEPS if mode == "kickstart" else RunConfig.steps
 
 
 def _default_harvest(options: dict, resume: Optional[Path], budget: int) -> None:

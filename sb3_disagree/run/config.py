@@ -39,9 +39,6 @@ DOPT_TRAIN_FRAME_STACK = 3
 # greedy success over this many validation episodes is highest. One more epoch on the same labels moved a run's
 # greedy success from 0.92 to 0.75 (docs/method.md, "A validated fit").
 DOPT_TRAIN_VALIDATION = 40
-# dopt train's budget for a new kickstarting run (100k for the other modes): with the validated fit, 100k took make
-# run to 6 min 25 s on 2 cores, over its 6 minutes; the policy alone at 85k is in docs/results.md ("The default budget").
-DOPT_TRAIN_STEPS = 85_000
 
 
 def acer_defaults(mode: str) -> dict[str, Any]:
