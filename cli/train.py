@@ -87,8 +87,8 @@ def _run_options() -> list:
 
 
 def _cli_only(card_episodes: int = 20, progress_every: float = 30.0, reward_scale: Optional[float] = None,
-              ema_decay: Optional[float] = None, collision_penalty: Optional[float] = None,
-              reward_distance: Optional[str] = None) -> None:
+              ema_decay: Optional[float] = None, features_dtype: Optional[str] = None,
+              collision_penalty: Optional[float] = None, reward_distance: Optional[str] = None) -> None:
     """
     :param reward_scale: Rewards in ACER's updates are multiplied by this (default: the mode's; 1.0 for
         kickstarting, 0.1 for the others). At 1.0 kickstarting's policy is sharper, its argmax a real choice
@@ -96,6 +96,8 @@ def _cli_only(card_episodes: int = 20, progress_every: float = 30.0, reward_scal
     :param ema_decay: The saved model acts with a moving average of the policy's weights, of this decay per update
         (default: the mode's; 0.999 for kickstarting, 0 (the last weights) for the others); learning is unchanged
         (docs/acer.md, item 22)
+    :param features_dtype: "bfloat16": the CNN's passes in ACER's updates run in bfloat16 (faster on CPUs with
+        bfloat16 instructions); heads, losses, acting and the saved weights stay float32 (default: float32)
     :param collision_penalty: Subtracted from the env's reward on a blocked move_forward (the env's
         collision_penalty; default 0, the paper's reward); what counts as success is unchanged
     :param reward_distance: What the env's reward distance follows: "euclidean" (the apartment's default, the
@@ -116,7 +118,7 @@ def train(**options) -> None:
 
         out, resume, force, card_episodes, every = (
             options.pop(k) for k in ("out", "resume", "force", "card_episodes", "progress_every"))
-        options["acer_kwargs"] = {k: v for k in ("reward_scale", "ema_decay") if (v := options.pop(k)) is not None}
+        options["acer_kwargs"] = {k: v for k in ("reward_scale", "ema_decay", "features_dtype") if (v := options.pop(k)) is not None}
         options["env_kwargs"] = {k: v for k in ("collision_penalty", "reward_distance") if (v := options.pop(k)) is not None}
         steps = options["steps"]
         budget = steps or 100_000

@@ -84,6 +84,9 @@ class ACER(BaseAlgorithm):
     :param distill_steps: The distillation weight falls linearly to 0 at this many env steps (0: constant)
     :param distill_states: "followed" distils on the steps where the teacher chose the action, "all" on every
         step that has a teacher
+    :param features_dtype: "bfloat16" computes the features extractor's passes in ACER's updates (and the values
+        of truncated episodes' last states) under ``torch.autocast`` in bfloat16; the heads, targets and losses stay
+        float32, as do acting (rollouts, ``predict``) and the weights. None (the default): all float32
     :param behaviour: The behaviour policy that chooses the actions during rollouts; sampling from the
         current policy if None. It is not saved with the model.
     :param overlap: Run the replay updates of segment k in a second thread while segment k + 1 is
@@ -132,6 +135,7 @@ class ACER(BaseAlgorithm):
         distill_coef: float = 0.0,
         distill_steps: int = 0,
         distill_states: str = "followed",
+        features_dtype: Optional[str] = None,
         behaviour: Optional[BehaviourPolicy] = None,
         overlap: bool = False,
         stats_window_size: int = 100,
@@ -179,6 +183,9 @@ class ACER(BaseAlgorithm):
         if distill_coef < 0 or distill_steps < 0:
             raise ValueError("distill_coef and distill_steps must be >= 0")
         as_schedule(ent_coef), as_schedule(learning_rate)  # refuse what is not a weight
+        if features_dtype not in (None, "bfloat16"):
+            raise ValueError(f"features_dtype must be 'bfloat16' or None, got {features_dtype!r}")
+        self.features_dtype = features_dtype
         self.distill_coef = distill_coef
         self.distill_steps = distill_steps
         self.distill_states = distill_states
@@ -202,6 +209,7 @@ class ACER(BaseAlgorithm):
             self.observation_space, self.action_space, self.lr_schedule, **policy_kwargs
         )
         self.policy = self.policy.to(self.device)
+        self.policy.features_autocast = None if self.features_dtype is None else getattr(th, self.features_dtype)
         self.replay_buffer = SegmentReplayBuffer(
             self.buffer_size, self.n_steps, self.n_envs, self.policy.net_observation_space, int(self.action_space.n),
             frame_stack=self.policy.frame_stack,

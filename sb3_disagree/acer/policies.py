@@ -141,6 +141,8 @@ class ACERPolicy(BasePolicy):
         self.n_actions = int(action_space.n)
         self.frame_stack = frame_stack
         self.ema = ema
+        # Set by ACER (``features_dtype``): the dtype the training passes' features are computed in, None for float32.
+        self.features_autocast: Optional[th.dtype] = None
         self.net_observation_space = stacked_space(observation_space, frame_stack)  # type: ignore[arg-type]
         self.action_dist = CategoricalDistribution(self.n_actions)
         self._build(lr_schedule)
@@ -188,12 +190,27 @@ class ACERPolicy(BasePolicy):
             return features_extractor(obs)
         return super().extract_features(obs, features_extractor)
 
+    def training_features(self, obs: PyTorchObs, net: "ACERNetwork") -> th.Tensor:
+        """
+        The features of ``net`` for the training passes: under ``torch.autocast`` to ``features_autocast`` where it
+        is set (the features extractor's convolutions in bfloat16), returned as float32 so that the heads, the
+        Q-values and the losses stay float32.
+
+        :param obs: Observations, as tensors
+        :param net: ``net`` or ``average_net``
+        """
+        if self.features_autocast is None:
+            return self.extract_features(obs, net.features_extractor)
+        with th.autocast(self.device.type, dtype=self.features_autocast):
+            features = self.extract_features(obs, net.features_extractor)
+        return features.float()
+
     def logits_and_q(self, obs: PyTorchObs) -> tuple[th.Tensor, th.Tensor]:
         """
         :param obs: Observations, as tensors
         :return: Policy logits and Q-values, both of shape (batch, n_actions)
         """
-        return self.net(self.extract_features(obs, self.net.features_extractor))
+        return self.net(self.training_features(obs, self.net))
 
     @property
     def acting_net(self) -> ACERNetwork:
@@ -206,7 +223,7 @@ class ACERPolicy(BasePolicy):
         :return: Logits of the average policy network (no gradient)
         """
         with th.no_grad():
-            return self.average_net.logits(self.extract_features(obs, self.average_net.features_extractor))
+            return self.average_net.logits(self.training_features(obs, self.average_net))
 
     def action_probs(self, obs: PyTorchObs) -> th.Tensor:
         """
