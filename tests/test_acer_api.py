@@ -264,3 +264,25 @@ def test_overlap_caps_the_replays_per_segment_and_carries_the_rest():
     assert sum(model.batches) == sum(model.draws) and model._n_updates == segments + sum(model.draws)
     owed = np.cumsum(model.draws) - np.cumsum(model.batches[:-1])
     assert np.array_equal(model.batches[:-1], np.minimum(owed + model.batches[:-1], cap))
+
+
+def test_bfloat16_features_keep_the_heads_and_acting_in_float32_and_round_trip(tmp_path):
+    env = make_vec_env(ImageEnv, n_envs=2, seed=0)
+    model = ACER("CnnPolicy", env, n_steps=4, seed=0, replay_start=8, features_dtype="bfloat16")
+    policy = model.policy
+    obs = th.as_tensor(np.stack([np.full((3, 40, 40), v, np.uint8) for v in (20, 90, 200)]))
+    logits, q = policy.logits_and_q(obs)
+    assert logits.dtype == q.dtype == th.float32  # the heads and what the losses see stay float32
+    policy.features_autocast = None
+    exact_logits, exact_q = policy.logits_and_q(obs)
+    exact_probs = policy.action_probs(obs)
+    # bfloat16 keeps 8 bits of mantissa: the features (and so the heads' outputs) move by about 1%, no more
+    assert th.allclose(logits, exact_logits, atol=0.05, rtol=0.05) and not th.equal(q, exact_q)
+    policy.features_autocast = th.bfloat16
+    assert th.equal(policy.action_probs(obs), exact_probs)  # acting is float32 either way
+    model.learn(200)
+    model.save(tmp_path / "model.zip")
+    loaded = ACER.load(tmp_path / "model.zip")
+    assert loaded.features_dtype == "bfloat16" and loaded.policy.features_autocast == th.bfloat16
+    with pytest.raises(ValueError, match="features_dtype"):
+        ACER("CnnPolicy", env, features_dtype="float16")
