@@ -10,6 +10,8 @@ to end and its saved model evaluated alone both ways. Compact results go to benc
         # seeds). With --replay-ratio (not a dopt train option), the run is dopt train's default as a default run's
         # config.yaml resolves it (--like, the shipped make-run's), ACER's replay ratio replaced, through the library
     python benchmarks/default_budget.py table OUT/G-S [...]   # one row per run, then the means per task
+    python benchmarks/default_budget.py curve NAME OUT/G-S [...]  # training success curves into NAME/curves.csv, and
+        # where each goal's mean curve first reaches 90%
     python benchmarks/default_budget.py keep NAME OUT/G-S [...]   # copy the compact results into NAME/
 """
 
@@ -18,6 +20,7 @@ import re
 import shutil
 import subprocess
 import sys
+import warnings
 from pathlib import Path
 from typing import Optional
 
@@ -113,6 +116,29 @@ def table(folders: list[Path]) -> None:
               f"{wall.max() / 60:.2f} max; peak memory {max(r['gb'] for r in mine):.1f} GB")
 
 
+def curve(name: str, folders: list[Path], steps: int = 100_000, points: int = 50) -> None:
+    """Each run's training success on a grid of env steps (the last 50 episodes, as `dopt experiment report`'s curves),
+    written to ``RESULTS/NAME/curves.csv``; prints the env steps at which each goal's mean curve first reaches 90%."""
+    import pandas as pd
+
+    from sb3_disagree.experiments.curves import steps_to, success_curve
+
+    grid = np.linspace(steps / points, steps, points)
+    curves = {}
+    for folder in folders:
+        run_dir = next(folder.rglob("config.yaml")).parent
+        curves[folder.name] = success_curve(run_dir, grid)
+    (RESULTS / name).mkdir(parents=True, exist_ok=True)
+    pd.DataFrame({"env_steps": grid, **curves}).to_csv(RESULTS / name / "curves.csv", index=False, float_format="%.4f")
+    for goal in dict.fromkeys(key.rsplit("-", 1)[0] for key in curves):
+        mine = [c for key, c in curves.items() if key.rsplit("-", 1)[0] == goal]
+        with warnings.catch_warnings():  # grid steps before any run has 10 episodes: no mean
+            warnings.simplefilter("ignore", RuntimeWarning)
+            reached = steps_to(np.nanmean(mine, axis=0), grid, 0.9)
+        print(f"{goal}, {len(mine)} runs: the mean curve first at 90% training success at "
+              f"{'never' if reached is None else f'{reached / 1000:.0f}k'} env steps")
+
+
 def keep(name: str, folders: list[Path]) -> None:
     for folder in folders:
         dest = RESULTS / name / folder.name
@@ -140,6 +166,9 @@ if __name__ == "__main__":
                        ("replay_ratio", float)):
         p.add_argument(name, type=kind)
     sub.add_parser("table").add_argument("folders", type=Path, nargs="+")
+    p = sub.add_parser("curve")
+    p.add_argument("name")
+    p.add_argument("folders", type=Path, nargs="+")
     p = sub.add_parser("keep")
     p.add_argument("name")
     p.add_argument("folders", type=Path, nargs="+")
@@ -150,5 +179,7 @@ if __name__ == "__main__":
         variant(args.goal, args.seed, args.out, args.like, args.steps, args.replay_ratio)
     elif args.command == "table":
         table(args.folders)
+    elif args.command == "curve":
+        curve(args.name, args.folders)
     else:
         keep(args.name, args.folders)
