@@ -97,7 +97,8 @@ def _cli_only(card_episodes: int = 20, progress_every: float = 30.0, reward_scal
         (default: the mode's; 0.999 for kickstarting, 0 (the last weights) for the others); learning is unchanged
         (docs/acer.md, item 22)
     :param features_dtype: "bfloat16": the CNN's passes in ACER's updates run in bfloat16 (faster on CPUs with
-        bfloat16 instructions); heads, losses, acting and the saved weights stay float32 (default: float32)
+        bfloat16 instructions); heads, losses, acting and the saved weights stay float32 ("float32", the
+        default: all float32; docs/results.md, "bfloat16 features")
     :param collision_penalty: Subtracted from the env's reward on a blocked move_forward (the env's
         collision_penalty; default 0, the paper's reward); what counts as success is unchanged
     :param reward_distance: What the env's reward distance follows: "euclidean" (the apartment's default, the

@@ -284,5 +284,6 @@ def test_bfloat16_features_keep_the_heads_and_acting_in_float32_and_round_trip(t
     model.save(tmp_path / "model.zip")
     loaded = ACER.load(tmp_path / "model.zip")
     assert loaded.features_dtype == "bfloat16" and loaded.policy.features_autocast == th.bfloat16
+    assert ACER("CnnPolicy", env, features_dtype="float32").policy.features_autocast is None
     with pytest.raises(ValueError, match="features_dtype"):
         ACER("CnnPolicy", env, features_dtype="float16")

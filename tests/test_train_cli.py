@@ -387,5 +387,6 @@ def test_evaluations_along_the_way_leave_training_unchanged(zoo, tmp_path):
 
 def test_an_unknown_features_dtype_is_refused_before_anything_is_written(tmp_path):
     result = runner.invoke(app, ["train", "--goal", "bathtub", "--features-dtype", "float16", "--out", str(tmp_path)])
-    assert result.exit_code == 2 and "--features-dtype must be bfloat16" in result.output
+    assert result.exit_code == 2 and "--features-dtype must be float32 or bfloat16" in result.output
     assert not any(tmp_path.iterdir())
+

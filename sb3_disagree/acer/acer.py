@@ -86,7 +86,7 @@ class ACER(BaseAlgorithm):
         step that has a teacher
     :param features_dtype: "bfloat16" computes the features extractor's passes in ACER's updates (and the values
         of truncated episodes' last states) under ``torch.autocast`` in bfloat16; the heads, targets and losses stay
-        float32, as do acting (rollouts, ``predict``) and the weights. None (the default): all float32
+        float32, as do acting (rollouts, ``predict``) and the weights. None or "float32" (the default): all float32
     :param behaviour: The behaviour policy that chooses the actions during rollouts; sampling from the
         current policy if None. It is not saved with the model.
     :param overlap: Run the replay updates of segment k in a second thread while segment k + 1 is
@@ -183,8 +183,8 @@ class ACER(BaseAlgorithm):
         if distill_coef < 0 or distill_steps < 0:
             raise ValueError("distill_coef and distill_steps must be >= 0")
         as_schedule(ent_coef), as_schedule(learning_rate)  # refuse what is not a weight
-        if features_dtype not in (None, "bfloat16"):
-            raise ValueError(f"features_dtype must be 'bfloat16' or None, got {features_dtype!r}")
+        if features_dtype not in (None, "float32", "bfloat16"):
+            raise ValueError(f"features_dtype must be 'float32', 'bfloat16' or None, got {features_dtype!r}")
         self.features_dtype = features_dtype
         self.distill_coef = distill_coef
         self.distill_steps = distill_steps
@@ -209,7 +209,7 @@ class ACER(BaseAlgorithm):
             self.observation_space, self.action_space, self.lr_schedule, **policy_kwargs
         )
         self.policy = self.policy.to(self.device)
-        self.policy.features_autocast = None if self.features_dtype is None else getattr(th, self.features_dtype)
+        self.policy.features_autocast = th.bfloat16 if self.features_dtype == "bfloat16" else None
         self.replay_buffer = SegmentReplayBuffer(
             self.buffer_size, self.n_steps, self.n_envs, self.policy.net_observation_space, int(self.action_space.n),
             frame_stack=self.policy.frame_stack,
