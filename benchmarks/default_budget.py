@@ -99,7 +99,7 @@ def _row(folder: Path) -> dict:
 
 
 def table(folders: list[Path]) -> None:
-    rows = [_row(folder) for folder in folders]
+    rows = [_row(folder) for folder in folders if folder.is_dir()]  # (a kept curves.csv beside the runs)
     print("| run | env steps | wall time, `dopt train` end to end | env steps/s | training success, last episodes | "
           "fit + validation | validation after each epoch | kept | saved model alone, greedy / sampled |")
     print("|---|---|---|---|---|---|---|---|---|")
