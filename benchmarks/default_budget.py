@@ -25,6 +25,7 @@ from pathlib import Path
 from typing import Optional
 
 import numpy as np
+from validated_fit import saved_success
 
 RESULTS = Path(__file__).parent / "results" / "default-budget"
 
@@ -83,8 +84,7 @@ def _row(folder: Path) -> dict:
 
     config = yaml.safe_load(next(folder.rglob("config.yaml")).read_text())
     (fit,) = config["consistency"]["per_round"]
-    lines = [line for line in (folder / "eval.txt").read_text().splitlines() if "success" in line]
-    greedy, sampled = (float(line.split("success ")[1].split(",")[0]) for line in lines[:2])
+    greedy, sampled = saved_success(folder)
     timing = (folder / "time.txt").read_text()
     wall = re.search(r"Elapsed \(wall clock\) time \(h:mm:ss or m:ss\): (\d+):([\d.]+)", timing)
     rss = int(re.search(r"Maximum resident set size \(kbytes\): (\d+)", timing).group(1))

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 import torch as th
-from stable_baselines3.common.callbacks import BaseCallback
+from train_speed import Rate
 
 
 def update_ms(dtype, repeats: int = 30) -> float:
@@ -41,31 +41,22 @@ def update_ms(dtype, repeats: int = 30) -> float:
     return (time.perf_counter() - start) / repeats * 1000
 
 
-class Rate(BaseCallback):
-    """Env steps/s from ``warm`` env steps to the end."""
-
-    def __init__(self, warm: int) -> None:
-        super().__init__()
-        self.warm, self.start = warm, None
-
-    def _on_step(self) -> bool:
-        if self.start is None and self.num_timesteps >= self.warm:
-            self.start = (time.perf_counter(), self.num_timesteps)
-        return True
+class RateAtEnd(Rate):
+    """``train_speed.Rate`` read when learning ends (before the run's closing save)."""
 
     def _on_training_end(self) -> None:
-        self.rate = (self.num_timesteps - self.start[1]) / (time.perf_counter() - self.start[0])
+        self.final = self.rate()
 
 
 def run_rate(dtype, steps: int, warm: int) -> float:
     from sb3_disagree.run import RunConfig, train
 
-    rate = Rate(warm)
+    rate = RateAtEnd(warm)
     config = RunConfig(goal="bathtub", steps=steps, overlap=True, frame_stack=3, loop_flags=True, greedy_phase=0,
                        consistency_harvest=0, checkpoint_every=0, acer_kwargs={"features_dtype": dtype})
     with tempfile.TemporaryDirectory() as out:
         train(config, Path(out), callbacks=[rate])
-    return rate.rate
+    return rate.final
 
 
 if __name__ == "__main__":

@@ -71,6 +71,13 @@ def refit(out: Path, epochs: int) -> None:
     print(*rows, sep="\n")
 
 
+def saved_success(out: Path) -> tuple[float, float]:
+    """The saved model's greedy and sampled success, read from ``dopt eval``'s two lines in ``out/eval.txt``."""
+    lines = [line for line in (out / "eval.txt").read_text().splitlines() if "success" in line]
+    greedy, sampled = (float(line.split("success ")[1].split(",")[0]) for line in lines[:2])
+    return greedy, sampled
+
+
 def table(outs: list[Path]) -> None:
     import yaml
 
@@ -80,8 +87,7 @@ def table(outs: list[Path]) -> None:
     for out in outs:
         config = yaml.safe_load(next(out.rglob("config.yaml")).read_text())
         (fit,) = config["consistency"]["per_round"]
-        lines = [line for line in (out / "eval.txt").read_text().splitlines() if "success" in line]
-        greedy, sampled = (float(line.split("success ")[1].split(",")[0]) for line in lines[:2])
+        greedy, sampled = saved_success(out)
         refits = {row["epoch"]: row["greedy"] for row in map(json.loads, (out / "refit.jsonl").read_text().splitlines())}
         print(f"| {config['goal']} {config['seed']} | {' '.join(f'{v:.2f}' for v in fit['validation'])} | "
               f"{int(fit['epoch'])} | {greedy:.2f} / {sampled:.2f} | {refits[int(fit['epoch'])]:.2f} / "
