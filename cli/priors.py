@@ -214,6 +214,32 @@ def train(**options) -> None:
         _show_evaluations(goal, evaluations)
 
 
+def _refine_options() -> list:
+    from sb3_disagree.priors.make import refine_entry
+
+    return [*options_of(refine_entry, only=("goal", "env_id", "rounds", "steps", "loop_uniform", "n_envs", "seed",
+                                            "episodes"),
+                        flags={"env_id": "--env"}, defaults={"env_id": DEFAULT_ENV}),
+            *options_of(list_priors, only=("zoo",))]
+
+
+@app.command()
+@command(_refine_options())
+def refine(**options) -> None:
+    """Run the greedy-consistency phase on a prior in the zoo, replacing it and its card's evaluations
+    (sb3_disagree.priors.make.refine_entry)."""
+    with clean_errors():
+        from sb3_disagree.priors.make import refine_entry
+
+        goal, zoo = options.pop("goal"), options.pop("zoo")
+        with _progress() as progress:
+            task = progress.add_task(f"refining {goal}", total=options["rounds"])
+            entry, evaluations = refine_entry(_zoo(zoo), goal, command=command_line(),
+                                              progress=lambda line: (progress.advance(task), console.print(line)),
+                                              **options)
+        _show_evaluations(goal, evaluations)
+
+
 def _evaluate(z, entry, episodes: int, deterministic: bool, seed: int):
     """Run a zoo entry alone for some episodes on 4 envs seeded from ``seed``, with a progress display."""
     from sb3_disagree.priors.make import evaluate_entry

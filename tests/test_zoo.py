@@ -4,6 +4,7 @@ import json
 
 import gymnasium as gym
 import pytest
+import torch as th
 from stable_baselines3 import DQN, PPO
 from stable_baselines3.common.env_util import make_vec_env
 from typer.testing import CliRunner
@@ -298,3 +299,46 @@ def test_cli_train_prior_with_consistency_phase(tmp_path):
     assert [r["env_steps"] for r in phase["per_round"]] == [800, 800]
     assert all(r["successes"] <= r["episodes"] for r in phase["per_round"])
     assert " ".join(result.output.split()).count("consistency round:") == 2
+
+
+def test_refine_is_the_second_half_of_training_with_the_phase(tmp_path):
+    """DAgger into the zoo, then refine_entry with the same seed, gives the very prior (weights and the phase's
+    record) that make_prior with --consistency-rounds gives in one go."""
+    from sb3_disagree.priors.make import make_prior, refine_entry
+
+    dagger = dict(rounds=2, steps_per_round=200, epochs=1)
+    one, two = Zoo(tmp_path / "one"), Zoo(tmp_path / "two")
+    make_prior(one, "toilet", STATE_ID, seed=3, episodes=0, consistency_rounds=2, consistency_steps=800, **dagger)
+    make_prior(two, "toilet", STATE_ID, seed=3, episodes=0, **dagger)
+    refine_entry(two, "toilet", STATE_ID, rounds=2, steps=800, seed=3, episodes=0)
+    a, b = (z.load(z.get("toilet", STATE_ID), device="cpu").policy.state_dict() for z in (one, two))
+    assert a.keys() == b.keys() and all(th.equal(a[k], b[k]) for k in a)
+    phases = [z.get("toilet", STATE_ID).card.training["consistency"] for z in (one, two)]
+    assert phases[0]["per_round"] == phases[1]["per_round"] and len(phases[0]["per_round"]) == 2
+
+
+def test_cli_refine_replaces_the_prior_and_keeps_its_history(tmp_path):
+    """dopt priors refine runs the phase on a zoo's prior in place: the card keeps the training, adds the phase and
+    the command, and records new evaluations; a second refinement is kept apart; bad input changes nothing."""
+    made = runner.invoke(app, ["priors", "train", "--goal", "toilet", "--env", STATE_ID, "--zoo", str(tmp_path),
+                               "--rounds", "1", "--steps-per-round", "200", "--epochs", "1", "--episodes", "0"])
+    assert made.exit_code == 0, made.output
+    before = Zoo(tmp_path).get("toilet", STATE_ID).card
+    base = ["priors", "refine", "--env", STATE_ID, "--zoo", str(tmp_path), "--steps", "400", "--episodes", "2"]
+    for bad, words in ((["--goal", "toilet", "--rounds", "0"], "--rounds must be >= 1"),
+                       (["--goal", "toilet", "--rounds", "1", "--loop-uniform", "2"], "[0, 1]"),
+                       (["--goal", "bathtub", "--rounds", "1"], "no prior for 'bathtub'")):
+        result = runner.invoke(app, [*base, *bad])
+        assert result.exit_code == 2 and words in " ".join(result.output.split()), result.output
+        assert Zoo(tmp_path).get("toilet", STATE_ID).card == before
+    result = runner.invoke(app, [*base, "--goal", "toilet", "--rounds", "2", "--seed", "1"])
+    assert result.exit_code == 0, result.output
+    card = Zoo(tmp_path).get("toilet", STATE_ID).card
+    assert card.sha256 != before.sha256 and card.training["rounds"] == before.training["rounds"] == 1
+    assert card.training["consistency"]["rounds"] == 2 and len(card.training["consistency"]["per_round"]) == 2
+    assert card.command == f"{before.command}; then {before.command}"  # both the test runner's argv here
+    assert card.evaluation["episodes"] == card.evaluation_greedy["episodes"] == 2
+    again = runner.invoke(app, [*base, "--goal", "toilet", "--rounds", "1", "--episodes", "0"])
+    assert again.exit_code == 0, again.output
+    card = Zoo(tmp_path).get("toilet", STATE_ID).card
+    assert [p["rounds"] for p in card.training["consistency_more"]] == [1] and not card.evaluation

@@ -327,6 +327,54 @@ def refine_prior(model: ACER, env_id: str, goal: str, rounds: int, steps: int, l
             "seconds": round(time.perf_counter() - start, 1), "per_round": [r.as_dict() for r in history]}
 
 
+def refine_entry(zoo: Any, goal: str, env_id: str, rounds: int, steps: int = 20_000, loop_uniform: float = 0.5,
+                 n_envs: int = 4, seed: int = 0, episodes: int = 100, command: str = "",
+                 progress: Optional[Callable[[str], None]] = None) -> tuple[Any, dict[str, Evaluation]]:
+    """
+    The greedy-consistency phase (:func:`refine_prior`) on a prior already in the zoo, which it replaces: the card keeps
+    how the prior was trained, adds the phase, and records the refined prior's evaluation alone anew. With the seed
+    of the prior's training this is the second half of ``make_prior(..., consistency_rounds=rounds)``, for a prior
+    whose training stopped after DAgger or that loops greedily. What ``dopt priors refine`` does.
+
+    :param zoo: The :class:`~sb3_disagree.priors.zoo.Zoo`
+    :param goal: The prior's goal
+    :param env_id: Its environment
+    :param rounds: Rounds of the phase (>= 1)
+    :param steps: Env steps per round
+    :param loop_uniform: In a loop, the phase draws from ``(1 - u) pi + u / n``
+    :param n_envs: Parallel envs
+    :param seed: Seed of the phase (env seeds ``seed + CONSISTENCY_SEED_OFFSET``)
+    :param episodes: Evaluation episodes each way for the card (0: none, and the card's old evaluations are dropped)
+    :param command: The command that refined it, added to the card's command
+    :param progress: Called with a line of text after each round
+    :return: The zoo entry (as read back) and the evaluations by label ("greedy", "sampled")
+    """
+    import tempfile
+    from pathlib import Path
+
+    if rounds < 1 or steps < n_envs or not 0 <= loop_uniform <= 1 or episodes < 0:
+        raise ValueError(f"--rounds must be >= 1, --steps >= {n_envs} (one per env), --loop-uniform in [0, 1] and "
+                         f"--episodes >= 0, got {rounds}, {steps}, {loop_uniform} and {episodes}")
+    entry = zoo.get(goal, env_id)
+    if entry.problem or entry.card is None:
+        raise ValueError(f"the prior for {goal!r} cannot be loaded: {entry.problem or 'it has no card'}")
+    model = zoo.load(entry, device="auto")
+    if not isinstance(model, ACER):
+        raise ValueError(f"the greedy-consistency phase refines an ACER prior, and {goal!r} is {type(model).__name__}")
+    record = dict(entry.card.training or {})
+    phase = refine_prior(model, env_id, goal, rounds, steps, loop_uniform, n_envs, seed, progress)
+    if "consistency" in record:  # a second phase: kept apart, in order
+        record["consistency_more"] = [*record.get("consistency_more", []), phase]
+    else:
+        record["consistency"] = phase
+    made_by = "; then ".join(c for c in (entry.card.command, command) if c)
+    with tempfile.TemporaryDirectory() as tmp:
+        model.save(Path(tmp) / "model.zip")
+        entry = zoo.add(Path(tmp) / "model.zip", goal, env_id, env_kwargs=entry.card.env_kwargs, training=record,
+                        command=made_by, replace=True)
+    return record_evaluations(zoo, entry, episodes) if episodes else (entry, {})
+
+
 def record_evaluations(zoo: Any, entry: Any, episodes: int,
                        progress: Optional[Callable[[str, int], None]] = None) -> tuple[Any, dict[str, Evaluation]]:
     """
