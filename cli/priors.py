@@ -16,7 +16,8 @@ from sb3_disagree.priors.language import load_embedding
 
 app = typer.Typer(help="The prior zoo: list, show, add, remove, evaluate and train priors.", no_args_is_help=True)
 
-ZOO_OPT = typer.Option(None, "--zoo", help="Zoo folder (default: the shipped zoo).")
+ZOO_OPT = typer.Option(None, "--zoo", help="Zoo folder, or 'greedy' for the shipped greedy zoo (default: the "
+                       "shipped zoo).")
 ENV_OPT = typer.Option(DEFAULT_ENV, "--env", help="Gymnasium id of the environment.")
 EMB_OPT = typer.Option(None, "--embedding", help="Word vectors (word2vec/GloVe/fastText/KeyedVectors); default MiniLM.")
 

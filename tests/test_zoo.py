@@ -1,6 +1,7 @@
 """The prior zoo and `dopt priors`: cards, checks, atomic writes, error cases, the CLI."""
 
 import json
+from pathlib import Path
 
 import gymnasium as gym
 import pytest
@@ -342,3 +343,25 @@ def test_cli_refine_replaces_the_prior_and_keeps_its_history(tmp_path):
     assert again.exit_code == 0, again.output
     card = Zoo(tmp_path).get("toilet", STATE_ID).card
     assert [p["rounds"] for p in card.training["consistency_more"]] == [1] and not card.evaluation
+
+
+def test_a_shipped_zoo_by_name_unless_a_folder_has_that_name(tmp_path, monkeypatch):
+    """--zoo greedy names the zoo shipped beside the default one; a folder called greedy where the name is read wins;
+    the shipped zoos need no trust list."""
+    from sb3_disagree.priors import zoo as zoo_module
+
+    shipped = tmp_path / "shipped"
+    monkeypatch.setitem(zoo_module.SHIPPED_ZOOS, "greedy", shipped)
+    monkeypatch.chdir(tmp_path)
+    assert Zoo().root == zoo_module.DEFAULT_ZOO and Zoo("greedy").root == shipped
+    assert Zoo("other").root == Path("other")
+    trust = tmp_path / "trusted.txt"
+    trust.write_text("0" * 64 + "\n")
+    model = ACER("MlpPolicy", make_vec_env(STATE_ID, n_envs=1, env_kwargs=dict(goal="bed")), seed=0)
+    model.save(tmp_path / "bed.zip")
+    Zoo(shipped).add(tmp_path / "bed.zip", "bed", STATE_ID, training={"method": "test"})
+    assert Zoo("greedy", trusted=trust).get("bed", STATE_ID).problem is None
+    listed = runner.invoke(app, ["priors", "list", "--zoo", "greedy", "--env", STATE_ID])
+    assert listed.exit_code == 0 and "bed" in listed.output, listed.output
+    (tmp_path / "greedy").mkdir()
+    assert Zoo("greedy").root == Path("greedy") and Zoo("greedy").entries() == []

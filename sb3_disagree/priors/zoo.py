@@ -26,6 +26,21 @@ from sb3_disagree.files import write_atomic
 CARD = "card.json"
 MODEL = "model.zip"
 DEFAULT_ZOO = Path(__file__).resolve().parent.parent / "data" / "zoo"  # the shipped zoo, package data
+# Zoos shipped beside it, by the name that --zoo accepts: "greedy", the priors made to work alone greedily (DAgger with
+# loop flags, then the greedy-consistency phase; docs/zoo.md).
+SHIPPED_ZOOS = {"greedy": DEFAULT_ZOO.parent / "zoo-greedy"}
+
+
+def zoo_root(root: Optional[Union[str, Path]] = None) -> Path:
+    """
+    The folder of a zoo: the shipped zoo for None; a shipped zoo's name (``SHIPPED_ZOOS``) unless a folder of that
+    name exists where the name is read; else the folder itself.
+    """
+    if root is None:
+        return DEFAULT_ZOO
+    if str(root) in SHIPPED_ZOOS and not Path(root).exists():
+        return SHIPPED_ZOOS[str(root)]
+    return Path(root)
 # Algorithms whose policies expose a discrete action distribution (``policy.get_distribution``).
 DISTRIBUTION_CLASSES = {
     "ACER": "sb3_disagree.acer.ACER",
@@ -204,11 +219,12 @@ class Zoo:
     """
     A prior zoo rooted at a folder.
 
-    :param root: The zoo folder; the zoo shipped with the package by default
+    :param root: The zoo folder, or the name of a zoo shipped beside the default one ("greedy"); the zoo shipped
+        with the package by default
     """
 
     def __init__(self, root: Optional[Union[str, Path]] = None, trusted: Optional[Union[str, Path]] = None) -> None:
-        self.root = Path(root) if root is not None else DEFAULT_ZOO
+        self.root = zoo_root(root)
         # A trust list kept outside the zoo (a file of SHA-256 hashes, one per line; SB3_DISAGREE_TRUSTED names
         # one for every command): where given, an entry whose model is not on it is refused before anything
         # of it is unpickled. The shipped zoo needs none.
@@ -246,7 +262,7 @@ class Zoo:
                 problem = "no model.zip"
             elif sha256_of(goal_dir / MODEL) != card.sha256:
                 problem = "model.zip does not match the card's sha256 (corrupt or replaced)"
-            elif self.trusted is not None and self.root != DEFAULT_ZOO and card.sha256 not in self.trusted:
+            elif self.trusted is not None and self.root not in (DEFAULT_ZOO, *SHIPPED_ZOOS.values()) and card.sha256 not in self.trusted:
                 problem = "model.zip is not on the trust list"
         return Entry(goal_dir, env_id, card.goal if card else goal_dir.name, card, problem)
 

@@ -68,7 +68,7 @@ class RunConfig:
     :param seed: Seed
     :param n_envs: Parallel envs
     :param embedding: Word vectors file; None for the default
-    :param zoo: Zoo folder; None for the shipped one
+    :param zoo: Zoo folder, or "greedy" for the shipped greedy zoo; None for the shipped one
     :param acer_kwargs: ACER's hyperparameters, on top of the mode's defaults (``acer_defaults(mode)``); the
         saved config holds them all
     :param env_kwargs: The environment's keyword arguments besides the goal
