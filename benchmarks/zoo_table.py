@@ -1,9 +1,11 @@
 """
-The shipped zoo as a table in docs/zoo.md, read from the cards (goal, method, steps, success greedy and
-sampled, size).
+A shipped zoo as a table in docs/zoo.md, read from the cards (goal, method, steps, memory, phase, success greedy
+and sampled, size): the default zoo, or one shipped beside it by name.
 
-    python benchmarks/zoo_table.py
+    python benchmarks/zoo_table.py [--zoo greedy]
 """
+
+import argparse
 
 from docs_section import write_section
 
@@ -16,34 +18,48 @@ def _success(ev: dict) -> str:
     return f"{ev['success_rate']:.3f} ({round(ev['success_rate'] * episodes)}/{episodes})" if episodes else "-"
 
 
+def _length(ev: dict) -> str:
+    return f"{ev['mean_length']:.1f}" if ev.get("episodes") else "-"
+
+
 def main() -> None:
-    zoo = Zoo()
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--zoo", default=None, help="a shipped zoo's name (default: the default zoo)")
+    args = parser.parse_args()
+    zoo = Zoo(args.zoo)
     rows, total = [], 0
     for e in zoo.entries():
         size = e.model_path.stat().st_size if e.model_path.exists() else 0
         total += size
         card = e.card
         if card is None:
-            rows.append(f"| {e.goal} | {e.env_id} | - | - | - | - | - | - | {e.problem} |")
+            rows.append(f"| {e.goal} | {e.env_id} | - | - | - | - | - | - | - | - | {e.problem} |")
             continue
-        ev, tr = card.evaluation, card.training
-        success, greedy = _success(ev), _success(card.evaluation_greedy)
+        tr = card.training
+        memory = f"{tr.get('frame_stack', 1)}{'+flags' if tr.get('loop_flags') else ''}"
+        phase = sum(p.get("rounds", 0) for p in [tr.get("consistency") or {}, *tr.get("consistency_more", [])])
         rows.append(
-            f"| {e.goal} | {e.env_id} | {tr.get('method', '?')} | {tr.get('steps', '?')} | {greedy} | {success} | "
-            f"{ev.get('mean_length', float('nan')):.1f} | "
+            f"| {e.goal} | {e.env_id} | {tr.get('method', '?')} | {tr.get('steps', '?')} | {memory} | {phase} | "
+            f"{_success(card.evaluation_greedy)} | {_success(card.evaluation)} | "
+            f"{_length(card.evaluation_greedy)} / {_length(card.evaluation)} | "
             f"{size / 1e6:.1f} MB | {'ok' if not e.problem else e.problem} |"
         )
+    name = f"the shipped {args.zoo} zoo (`--zoo {args.zoo}`)" if args.zoo else "the shipped zoo"
     body = (
-        "Read from the cards by `python benchmarks/zoo_table.py`. Success: the prior alone from its env's "
+        f"{name[0].upper() + name[1:]}, read from the cards by `python benchmarks/zoo_table.py"
+        f"{f' --zoo {args.zoo}' if args.zoo else ''}`. Success: the prior alone from its env's "
         "start distribution (the apartment: random corridor poses; the office: random poses anywhere on the "
         "floor), over the episodes on the card (env seeds 10000+): greedy (SB3's default; \"-\" where the card "
         "has no greedy evaluation yet: `dopt priors eval GOAL --episodes 300 --record` adds it) and sampled, "
-        "as the method follows priors. Mean length of the sampled episodes. Each card keeps the command that "
-        "made the prior.\n\n"
-        "| goal | env | method | labelled steps | success greedy | success sampled | mean length | size | status |\n"
-        "|---|---|---|---|---|---|---|---|---|\n" + "\n".join(rows) + f"\n\nTotal size: {total / 1e6:.1f} MB.\n"
+        "as the method follows priors. Memory: frames the prior sees (`+flags`: the newest frame and loop flags). "
+        "Phase: rounds of the greedy-consistency phase after training. Mean length greedy / sampled. Each card "
+        "keeps the command that made the prior.\n\n"
+        "| goal | env | method | labelled steps | memory | phase | success greedy | success sampled | mean length "
+        "| size | status |\n"
+        "|---|---|---|---|---|---|---|---|---|---|---|\n" + "\n".join(rows) + f"\n\nTotal size: {total / 1e6:.1f} MB.\n"
     )
-    write_section("zoo-table", "The shipped zoo", body, page="zoo.md")
+    section = f"zoo-table-{args.zoo}" if args.zoo else "zoo-table"
+    write_section(section, f"The shipped {args.zoo + ' ' if args.zoo else ''}zoo", body, page="zoo.md")
     print(body)
 
 

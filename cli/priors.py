@@ -207,7 +207,9 @@ def train(**options) -> None:
                                               "validation_episodes", "learner_actions", "frame_stack",
                                               "loop_flags")}
         with _progress() as progress:
-            total = (dagger["rounds"] if method == "dagger" else 1) + options["consistency_rounds"]
+            # a line per round, and one each for the kept round and the final epochs where there are any
+            lines = dagger["rounds"] + (dagger["validation_episodes"] > 0) + (dagger["final_epochs"] > 0)
+            total = (lines if method == "dagger" else 1) + options["consistency_rounds"]
             task = progress.add_task(f"{method} {goal}", total=total)
             entry, evaluations = make_prior(_zoo(zoo), goal, method=method, command=command_line(),
                                             progress=lambda line: (progress.advance(task), console.print(line)),
