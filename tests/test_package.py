@@ -64,6 +64,7 @@ def test_the_wheel_works_alone_from_another_folder(tmp_path):
     where = run(str(python), "-c", "import sb3_disagree, sb3_disagree.priors.zoo as z; print(sb3_disagree.__file__, z.DEFAULT_ZOO)")
     assert str(repo) not in where and str(venv) in where
     assert "chosen" in run(dopt, "priors", "list", "--goal", "bathtub")
+    assert "3+flags" in run(dopt, "priors", "list", "--zoo", "greedy", "--goal", "bathtub")  # shipped beside it
     assert "fig3-bathtub" in run(dopt, "experiment", "list")
     out = run(dopt, "train", "--goal", "bathtub", "--steps", "2000", "--card-episodes", "1")  # the RGB apartment
     assert "done: 2,000 steps" in " ".join(out.split())
