@@ -339,10 +339,12 @@ def test_cli_refine_replaces_the_prior_and_keeps_its_history(tmp_path):
     assert card.training["consistency"]["rounds"] == 2 and len(card.training["consistency"]["per_round"]) == 2
     assert card.command == f"{before.command}; then {before.command}"  # both the test runner's argv here
     assert card.evaluation["episodes"] == card.evaluation_greedy["episodes"] == 2
+    assert card.training["consistency"]["before"] == {}  # the DAgger prior had no evaluation on its card
     again = runner.invoke(app, [*base, "--goal", "toilet", "--rounds", "1", "--episodes", "0"])
     assert again.exit_code == 0, again.output
     card = Zoo(tmp_path).get("toilet", STATE_ID).card
     assert [p["rounds"] for p in card.training["consistency_more"]] == [1] and not card.evaluation
+    assert card.training["consistency_more"][0]["before"]["greedy"]["episodes"] == 2  # what the second phase replaced
 
 
 def test_a_shipped_zoo_by_name_unless_a_folder_has_that_name(tmp_path, monkeypatch):

@@ -332,7 +332,8 @@ def refine_entry(zoo: Any, goal: str, env_id: str, rounds: int, steps: int = 20_
                  progress: Optional[Callable[[str], None]] = None) -> tuple[Any, dict[str, Evaluation]]:
     """
     The greedy-consistency phase (:func:`refine_prior`) on a prior already in the zoo, which it replaces: the card keeps
-    how the prior was trained, adds the phase, and records the refined prior's evaluation alone anew. With the seed
+    how the prior was trained, adds the phase (with the evaluations it replaces, under ``before``), and records the
+    refined prior's evaluation alone anew. With the seed
     of the prior's training this is the second half of ``make_prior(..., consistency_rounds=rounds)``, for a prior
     whose training stopped after DAgger or that loops greedily. What ``dopt priors refine`` does.
 
@@ -363,6 +364,8 @@ def refine_entry(zoo: Any, goal: str, env_id: str, rounds: int, steps: int = 20_
         raise ValueError(f"the greedy-consistency phase refines an ACER prior, and {goal!r} is {type(model).__name__}")
     record = dict(entry.card.training or {})
     phase = refine_prior(model, env_id, goal, rounds, steps, loop_uniform, n_envs, seed, progress)
+    before = {"greedy": entry.card.evaluation_greedy, "sampled": entry.card.evaluation}
+    phase["before"] = {label: ev for label, ev in before.items() if ev}  # the card's evaluations it replaces
     if "consistency" in record:  # a second phase: kept apart, in order
         record["consistency_more"] = [*record.get("consistency_more", []), phase]
     else:
