@@ -41,6 +41,8 @@ def zoo_root(root: Optional[Union[str, Path]] = None) -> Path:
     if str(root) in SHIPPED_ZOOS and not Path(root).exists():
         return SHIPPED_ZOOS[str(root)]
     return Path(root)
+
+
 # Algorithms whose policies expose a discrete action distribution (``policy.get_distribution``).
 DISTRIBUTION_CLASSES = {
     "ACER": "sb3_disagree.acer.ACER",
@@ -262,7 +264,8 @@ class Zoo:
                 problem = "no model.zip"
             elif sha256_of(goal_dir / MODEL) != card.sha256:
                 problem = "model.zip does not match the card's sha256 (corrupt or replaced)"
-            elif self.trusted is not None and self.root not in (DEFAULT_ZOO, *SHIPPED_ZOOS.values()) and card.sha256 not in self.trusted:
+            elif (self.trusted is not None and self.root not in (DEFAULT_ZOO, *SHIPPED_ZOOS.values())
+                  and card.sha256 not in self.trusted):
                 problem = "model.zip is not on the trust list"
         return Entry(goal_dir, env_id, card.goal if card else goal_dir.name, card, problem)
 
