@@ -6,8 +6,10 @@ An environment offers an expert by a method ``expert_action()`` that returns the
 its current state (the apartment does); DAgger needs nothing else.
 """
 
+import tempfile
 import time
 from collections.abc import Callable
+from pathlib import Path
 from typing import Any, Optional, Union
 
 import numpy as np
@@ -264,9 +266,6 @@ def make_prior(zoo: Any, goal: str, env_id: str, method: str = "dagger", steps: 
     :param dagger_kwargs: :func:`train_dagger`'s own settings (rounds, epochs, validation_episodes, ...)
     :return: The zoo entry (as read back) and the evaluations by label ("greedy", "sampled")
     """
-    import tempfile
-    from pathlib import Path
-
     from sb3_disagree.defaults import PRIOR_VALIDATION_SEED
 
     if method not in METHODS:
@@ -293,9 +292,7 @@ def make_prior(zoo: Any, goal: str, env_id: str, method: str = "dagger", steps: 
     if consistency_rounds:
         record["consistency"] = refine_prior(model, env_id, goal, consistency_rounds, consistency_steps,
                                              consistency_loop_uniform, n_envs, seed, progress)
-    with tempfile.TemporaryDirectory() as tmp:
-        model.save(Path(tmp) / "model.zip")
-        entry = zoo.add(Path(tmp) / "model.zip", goal, env_id, training=record, command=command, replace=replace)
+    entry = _add_model(zoo, model, goal, env_id, record, command, replace)
     return record_evaluations(zoo, entry, episodes) if episodes else (entry, {})
 
 
@@ -333,9 +330,9 @@ def refine_entry(zoo: Any, goal: str, env_id: str, rounds: int, steps: int = 20_
     """
     The greedy-consistency phase (:func:`refine_prior`) on a prior already in the zoo, which it replaces: the card keeps
     how the prior was trained, adds the phase (with the evaluations it replaces, under ``before``), and records the
-    refined prior's evaluation alone anew. With the seed
-    of the prior's training this is the second half of ``make_prior(..., consistency_rounds=rounds)``, for a prior
-    whose training stopped after DAgger or that loops greedily. What ``dopt priors refine`` does.
+    refined prior's evaluation alone anew. With the seed of the prior's training this is the second half of
+    ``make_prior(..., consistency_rounds=rounds)``, for a prior whose training stopped after DAgger or that loops
+    greedily. What ``dopt priors refine`` does.
 
     :param zoo: The :class:`~sb3_disagree.priors.zoo.Zoo`
     :param goal: The prior's goal
@@ -350,16 +347,11 @@ def refine_entry(zoo: Any, goal: str, env_id: str, rounds: int, steps: int = 20_
     :param progress: Called with a line of text after each round
     :return: The zoo entry (as read back) and the evaluations by label ("greedy", "sampled")
     """
-    import tempfile
-    from pathlib import Path
-
     if rounds < 1 or steps < n_envs or not 0 <= loop_uniform <= 1 or episodes < 0:
         raise ValueError(f"--rounds must be >= 1, --steps >= {n_envs} (one per env), --loop-uniform in [0, 1] and "
                          f"--episodes >= 0, got {rounds}, {steps}, {loop_uniform} and {episodes}")
     entry = zoo.get(goal, env_id)
-    if entry.problem or entry.card is None:
-        raise ValueError(f"the prior for {goal!r} cannot be loaded: {entry.problem or 'it has no card'}")
-    model = zoo.load(entry, device="auto")
+    model = zoo.load(entry, device="auto")  # refuses an entry with a problem
     if not isinstance(model, ACER):
         raise ValueError(f"the greedy-consistency phase refines an ACER prior, and {goal!r} is {type(model).__name__}")
     record = dict(entry.card.training or {})
@@ -371,11 +363,17 @@ def refine_entry(zoo: Any, goal: str, env_id: str, rounds: int, steps: int = 20_
     else:
         record["consistency"] = phase
     made_by = "; then ".join(c for c in (entry.card.command, command) if c)
+    entry = _add_model(zoo, model, goal, env_id, record, made_by, replace=True, env_kwargs=entry.card.env_kwargs)
+    return record_evaluations(zoo, entry, episodes) if episodes else (entry, {})
+
+
+def _add_model(zoo: Any, model: BaseAlgorithm, goal: str, env_id: str, training: dict[str, Any], command: str,
+               replace: bool, env_kwargs: Optional[dict[str, Any]] = None) -> Any:
+    """Save a trained model into the zoo with its card (through a temporary file: the zoo copies it atomically)."""
     with tempfile.TemporaryDirectory() as tmp:
         model.save(Path(tmp) / "model.zip")
-        entry = zoo.add(Path(tmp) / "model.zip", goal, env_id, env_kwargs=entry.card.env_kwargs, training=record,
-                        command=made_by, replace=True)
-    return record_evaluations(zoo, entry, episodes) if episodes else (entry, {})
+        return zoo.add(Path(tmp) / "model.zip", goal, env_id, env_kwargs=env_kwargs, training=training,
+                       command=command, replace=replace)
 
 
 def record_evaluations(zoo: Any, entry: Any, episodes: int,
@@ -415,8 +413,6 @@ def add_prior(zoo: Any, model_path: Any, env_id: str, goal: Optional[str] = None
     :param progress: Called with the label and the number of finished episodes
     :return: The zoo entry (as read back) and the evaluations by label
     """
-    from pathlib import Path
-
     from sb3_disagree.model_card import CARD_NAME, read_model_card
 
     model_path = Path(model_path)
