@@ -221,7 +221,7 @@ def _refine_options() -> list:
     from sb3_disagree.priors.make import refine_entry
 
     return [*options_of(refine_entry, only=("goal", "env_id", "rounds", "steps", "loop_uniform", "n_envs", "seed",
-                                            "episodes"),
+                                            "episodes", "only_if_better"),
                         flags={"env_id": "--env"}, defaults={"env_id": DEFAULT_ENV}),
             *options_of(list_priors, only=("zoo",))]
 
@@ -237,10 +237,15 @@ def refine(**options) -> None:
         goal, zoo = options.pop("goal"), options.pop("zoo")
         with _progress() as progress:
             task = progress.add_task(f"refining {goal}", total=options["rounds"])
-            entry, evaluations = refine_entry(_zoo(zoo), goal, command=command_line(),
-                                              progress=lambda line: (progress.advance(task), console.print(line)),
-                                              **options)
+            entry, evaluations, replaced = refine_entry(
+                _zoo(zoo), goal, command=command_line(),
+                progress=lambda line: (progress.advance(task), console.print(line)), **options)
         _show_evaluations(goal, evaluations)
+        if not replaced:
+            card = entry.card
+            console.print(f"kept the prior in the zoo: the refined one is no better alone (the lower of greedy and "
+                          f"sampled success {min(e.success_rate for e in evaluations.values()):.3f}, the card's "
+                          f"{min(card.evaluation_greedy['success_rate'], card.evaluation['success_rate']):.3f})")
 
 
 def _evaluate(z, entry, episodes: int, deterministic: bool, seed: int):

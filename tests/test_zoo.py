@@ -347,6 +347,46 @@ def test_cli_refine_replaces_the_prior_and_keeps_its_history(tmp_path):
     assert card.training["consistency_more"][0]["before"]["greedy"]["episodes"] == 2  # what the second phase replaced
 
 
+def test_cli_refine_only_if_better_keeps_a_prior_the_phase_would_not_improve(tmp_path):
+    """--only-if-better replaces the prior only if the refined one's lower success (greedy or sampled, the card's env
+    seeds and episodes) beats the card's; it needs such a pair on the card, and refuses before training otherwise."""
+    from sb3_disagree.defaults import PRIOR_CARD_SEED
+    from sb3_disagree.priors.make import evaluate_entry
+
+    made = runner.invoke(app, ["priors", "train", "--goal", "toilet", "--env", STATE_ID, "--zoo", str(tmp_path),
+                               "--rounds", "1", "--steps-per-round", "200", "--epochs", "1", "--episodes", "4"])
+    assert made.exit_code == 0, made.output
+    zoo = Zoo(tmp_path)
+    base = ["priors", "refine", "--goal", "toilet", "--env", STATE_ID, "--zoo", str(tmp_path), "--rounds", "1",
+            "--steps", "400", "--only-if-better"]
+    before = zoo.get("toilet", STATE_ID).card
+    result = runner.invoke(app, [*base, "--episodes", "3"])  # the card's evaluations are over 4 episodes
+    assert result.exit_code == 2 and "no such pair" in " ".join(result.output.split()), result.output
+    assert zoo.get("toilet", STATE_ID).card == before
+
+    def card_says(rate: float) -> None:  # the card's evaluations, both ways, as if the prior were this good
+        entry = zoo.get("toilet", STATE_ID)
+        for greedy in (True, False):
+            entry = zoo.record_evaluation(entry, dict(success_rate=rate, episodes=4, mean_length=1.0, mean_return=0.0,
+                                                      deterministic=greedy, seed=PRIOR_CARD_SEED))
+
+    card_says(1.0)  # nothing beats it: the zoo is left as it was
+    before = zoo.get("toilet", STATE_ID).card
+    result = runner.invoke(app, [*base, "--episodes", "4"])
+    assert result.exit_code == 0 and "kept the prior" in result.output, result.output
+    assert zoo.get("toilet", STATE_ID).card == before
+    card_says(-1.0)  # anything beats it: replaced, with the refined prior's own evaluations
+    result = runner.invoke(app, [*base, "--episodes", "4"])
+    assert result.exit_code == 0 and "kept the prior" not in result.output, result.output
+    card = zoo.get("toilet", STATE_ID).card
+    assert card.sha256 != before.sha256 and card.training["consistency"]["before"]["greedy"]["success_rate"] == -1.0
+    assert card.evaluation["episodes"] == card.evaluation_greedy["episodes"] == 4
+    assert card.evaluation_greedy["seed"] == PRIOR_CARD_SEED
+    again = evaluate_entry(zoo, zoo.get("toilet", STATE_ID), 4, True, PRIOR_CARD_SEED)  # the saved weights, reloaded
+    assert again.success_rate == card.evaluation_greedy["success_rate"]
+    assert again.mean_length == card.evaluation_greedy["mean_length"]
+
+
 def test_a_shipped_zoo_by_name_unless_a_folder_has_that_name(tmp_path, monkeypatch):
     """--zoo greedy names the zoo shipped beside the default one; a folder called greedy where the name is read wins;
     the shipped zoos need no trust list."""

@@ -231,9 +231,16 @@ def evaluate_entry(zoo: Any, entry: Any, episodes: int, deterministic: bool, see
     :param seed: Env seed of the first env
     :param progress: Called with the number of finished episodes
     """
+    return _evaluate_model(lambda venv: zoo.load(entry, venv, device="cpu"), entry, episodes, deterministic, seed,
+                           progress)
+
+
+def _evaluate_model(load: Callable[[VecEnv], BaseAlgorithm], entry: Any, episodes: int, deterministic: bool, seed: int,
+                    progress: Optional[Callable[[int], None]] = None) -> Evaluation:
+    """A model (given by ``load``) alone for some episodes on 4 envs of a zoo entry's goal, seeded from ``seed``."""
     venv = make_vec(entry.env_id, entry.goal, entry.card.env_kwargs if entry.card else {}, n_envs=4, seed=seed)
     try:
-        return evaluate(zoo.load(entry, venv, device="cpu"), venv, episodes, deterministic, progress)
+        return evaluate(load(venv), venv, episodes, deterministic, progress)
     finally:
         venv.close()
 
@@ -325,8 +332,8 @@ def refine_prior(model: ACER, env_id: str, goal: str, rounds: int, steps: int, l
 
 
 def refine_entry(zoo: Any, goal: str, env_id: str, rounds: int, steps: int = 20_000, loop_uniform: float = 0.5,
-                 n_envs: int = 4, seed: int = 0, episodes: int = 100, command: str = "",
-                 progress: Optional[Callable[[str], None]] = None) -> tuple[Any, dict[str, Evaluation]]:
+                 n_envs: int = 4, seed: int = 0, episodes: int = 100, only_if_better: bool = False, command: str = "",
+                 progress: Optional[Callable[[str], None]] = None) -> tuple[Any, dict[str, Evaluation], bool]:
     """
     The greedy-consistency phase (:func:`refine_prior`) on a prior already in the zoo, which it replaces: the card keeps
     how the prior was trained, adds the phase (with the evaluations it replaces, under ``before``), and records the
@@ -343,10 +350,17 @@ def refine_entry(zoo: Any, goal: str, env_id: str, rounds: int, steps: int = 20_
     :param n_envs: Parallel envs
     :param seed: Seed of the phase (env seeds ``seed + CONSISTENCY_SEED_OFFSET``)
     :param episodes: Evaluation episodes each way for the card (0: none, and the card's old evaluations are dropped)
+    :param only_if_better: Replace the prior only if the refined one is better alone: the lower of its greedy and
+        sampled success over ``episodes`` from the card's env seeds above the card's (which must have both, over
+        as many episodes); else the zoo is left as it was. A phase can lower a prior (a greedy policy's success is
+        a fragile function of its weights), and the prior it would replace is otherwise lost
     :param command: The command that refined it, added to the card's command
     :param progress: Called with a line of text after each round
-    :return: The zoo entry (as read back) and the evaluations by label ("greedy", "sampled")
+    :return: The zoo entry (as read back), the refined prior's evaluations by label ("greedy", "sampled"), and
+        whether it replaced the prior
     """
+    from sb3_disagree.defaults import PRIOR_CARD_SEED
+
     if rounds < 1 or steps < n_envs or not 0 <= loop_uniform <= 1 or episodes < 0:
         raise ValueError(f"--rounds must be >= 1, --steps >= {n_envs} (one per env), --loop-uniform in [0, 1] and "
                          f"--episodes >= 0, got {rounds}, {steps}, {loop_uniform} and {episodes}")
@@ -354,9 +368,20 @@ def refine_entry(zoo: Any, goal: str, env_id: str, rounds: int, steps: int = 20_
     model = zoo.load(entry, device="auto")  # refuses an entry with a problem
     if not isinstance(model, ACER):
         raise ValueError(f"the greedy-consistency phase refines an ACER prior, and {goal!r} is {type(model).__name__}")
+    before = {"greedy": entry.card.evaluation_greedy, "sampled": entry.card.evaluation}
+    comparable = episodes > 0 and all(ev and ev.get("episodes") == episodes and ev.get("seed") == PRIOR_CARD_SEED
+                                      for ev in before.values())
+    if only_if_better and not comparable:
+        raise ValueError(f"--only-if-better compares with the card's greedy and sampled evaluations over --episodes "
+                         f"({episodes}) from seed {PRIOR_CARD_SEED}, and {goal!r}'s card has no such pair: run "
+                         f"dopt priors eval {goal} --episodes {episodes} --record first, or change --episodes")
     record = dict(entry.card.training or {})
     phase = refine_prior(model, env_id, goal, rounds, steps, loop_uniform, n_envs, seed, progress)
-    before = {"greedy": entry.card.evaluation_greedy, "sampled": entry.card.evaluation}
+    evaluations = {label: _evaluate_model(lambda _: model, entry, episodes, label == "greedy", PRIOR_CARD_SEED)
+                   for label in ("greedy", "sampled")} if episodes else {}
+    if only_if_better and (min(ev.success_rate for ev in evaluations.values())
+                           <= min(ev["success_rate"] for ev in before.values())):
+        return entry, evaluations, False
     phase["before"] = {label: ev for label, ev in before.items() if ev}  # the card's evaluations it replaces
     if "consistency" in record:  # a second phase: kept apart, in order
         record["consistency_more"] = [*record.get("consistency_more", []), phase]
@@ -364,7 +389,9 @@ def refine_entry(zoo: Any, goal: str, env_id: str, rounds: int, steps: int = 20_
         record["consistency"] = phase
     made_by = "; then ".join(c for c in (entry.card.command, command) if c)
     entry = _add_model(zoo, model, goal, env_id, record, made_by, replace=True, env_kwargs=entry.card.env_kwargs)
-    return record_evaluations(zoo, entry, episodes) if episodes else (entry, {})
+    for evaluation in evaluations.values():  # of these very weights, from the card's env seeds
+        entry = zoo.record_evaluation(entry, {**evaluation.as_dict(), "seed": PRIOR_CARD_SEED})
+    return entry, evaluations, True
 
 
 def _add_model(zoo: Any, model: BaseAlgorithm, goal: str, env_id: str, training: dict[str, Any], command: str,
