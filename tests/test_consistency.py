@@ -15,8 +15,9 @@ from typer.testing import CliRunner
 from sb3_disagree import ACER
 from stable_baselines3.common.callbacks import BaseCallback
 
-from sb3_disagree.acer.consistency import (HarvestLabels, RoundStats, _Rounds, collect_escapes, fit_best_epoch,
-                                          fit_labels, greedy_consistency, loop_free_labels)
+from sb3_disagree.acer.consistency import (HarvestLabels, RoundStats, _Labels, _Rounds, collect_escapes,
+                                          fit_best_epoch, fit_labels, greedy_consistency, loop_free_labels)
+from sb3_disagree.acer.memory import push_frames
 from sb3_disagree.cli.app import app
 
 runner = CliRunner()
@@ -33,13 +34,42 @@ def test_loop_free_labels_by_hand(keys, actions, expected):
     assert loop_free_labels(list(keys), actions) == expected
 
 
+def _episode_stacks(rng: np.random.Generator, steps: int, k: int) -> list[np.ndarray]:
+    """The stacks a k-frame policy sees over an episode of random (3, 4, 5) frames, as push_frames builds them."""
+    stacks, stack = [], None
+    for t in range(steps):
+        frame = rng.integers(1, 255, (1, 3, 4, 5), dtype=np.uint8)
+        stack = push_frames(stack, frame, np.array([t == 0]), k)
+        stacks.append(stack[0])
+    return stacks
+
+
+@pytest.mark.parametrize("k", [1, 3, 6])
+def test_labels_rebuild_each_stack_from_one_frame_a_step(k):
+    rng = np.random.default_rng(k)
+    labels = _Labels(k)
+    whole = _episode_stacks(rng, 12, k)
+    for stacks in (whole, whole[5:], whole[:1]):  # from the episode's start, from under way (a harvest), one step
+        keys = [x[len(x) - 3:].tobytes() for x in stacks]
+        keys[len(keys) // 2:] = keys[:len(keys) - len(keys) // 2]  # a loop back to the start, cut by the labels
+        path = loop_free_labels(keys, list(rng.integers(0, 3, len(stacks))))
+        before = len(labels.actions)
+        labels.add_episode(stacks, path)
+        assert np.array_equal(labels.inputs[before:], np.stack([stacks[t] for t, _ in path]))
+        assert labels.actions[before:] == [a for _, a in path]
+    assert len(labels.frames) == 12 + 7 + 1 + 3 * (k - 1)  # one frame a step, k - 1 more at each first step
+
+
 def test_rounds_index_as_one_array():
     rng = np.random.default_rng(0)
-    parts = [rng.integers(0, 255, (n, 2, 3), dtype=np.uint8) for n in (5, 1, 7)]
-    rounds = _Rounds()
-    for part in parts:
-        rounds.add(list(part))
-    rounds.add([])  # a round without labels adds nothing
+    rounds, parts = _Rounds(), []
+    for steps in (5, 1, 7):
+        labels = _Labels(3)
+        stacks = _episode_stacks(rng, steps, 3)
+        labels.add_episode(stacks, [(t, t % 3) for t in range(steps)])
+        rounds.add(labels)
+        parts.append(np.stack(stacks))
+    rounds.add(_Labels(3))  # a round without labels adds nothing
     whole = np.concatenate(parts)
     index = rng.permutation(len(whole))
     assert len(rounds) == 13 and np.array_equal(rounds[index], whole[index])
@@ -144,6 +174,43 @@ def test_harvest_keeps_the_loop_free_paths_of_training_episodes_after_its_start(
                 if np.bincount(v).max() * 2 > len(v)}
     obs = np.stack([np.frombuffer(k, dtype=np.float32) for k in majority])
     assert len(majority) >= 5 and (_probs(model, obs).argmax(1) == np.array(list(majority.values()))).all()
+
+
+class _RecordInputs(BaseCallback):
+    """Every env step of training as (the network's input, observation before it, action, done, success)."""
+
+    def _on_training_start(self) -> None:
+        self.steps = []
+
+    def _on_step(self) -> bool:
+        infos = self.locals["infos"]
+        self.steps.append((self.locals["observations"][self.locals["step"]].copy(), self.model._last_obs.copy(),
+                           self.locals["actions"].copy(), self.locals["dones"].copy(),
+                           [bool(info.get("is_success")) for info in infos]))
+        return True
+
+
+def test_harvest_keeps_the_stacks_a_memory_policy_saw():
+    # Three frames, the harvest starting in the middle of episodes: each label's input, rebuilt from single
+    # frames, is the stack ACER fed the network at that step, the frames from before the harvest's start included.
+    env = make_vec_env(TurnEnv, n_envs=4, seed=3)
+    model = ACER("MlpPolicy", env, seed=0, n_steps=10, policy_kwargs=dict(net_arch=[32], frame_stack=3))
+    record, harvest = _RecordInputs(), HarvestLabels(start=1602)  # from the 401st step of the 4 envs on
+    model.learn(3000, callback=[record, harvest])
+    expected, under_way = [], 0
+    for i in range(4):
+        trail, first = [], not record.steps[399][3][i]
+        for net_input, before, actions, dones, successes in record.steps[400:]:
+            trail.append((net_input[i], before[i].tobytes(), int(actions[i])))
+            if dones[i]:
+                if successes[i]:
+                    labels = loop_free_labels([key for _, key, _ in trail], [a for _, _, a in trail])
+                    expected += [(trail[t][0].tobytes(), a) for t, a in labels]
+                    under_way += first
+                trail, first = [], False
+    got = [(x.tobytes(), a) for x, a in zip(harvest.trails.labels.inputs, harvest.trails.labels.actions)]
+    assert under_way >= 1 and len(expected) > 50 and sorted(got) == sorted(expected)
+    assert harvest.trails.labels.inputs.shape[1:] == (60,)
 
 
 @pytest.mark.parametrize("scores, kept", [

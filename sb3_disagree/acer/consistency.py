@@ -21,7 +21,7 @@ from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.preprocessing import maybe_transpose
 from stable_baselines3.common.vec_env import VecEnv
 
-from sb3_disagree.acer.memory import push_frames
+from sb3_disagree.acer.memory import LinkedFrames, push_frames
 
 
 def loop_free_labels(keys: list[Any], actions: list[int]) -> list[tuple[int, int]]:
@@ -69,19 +69,63 @@ class RoundStats:
                 if k not in ("epoch", "validation") or self.validation}
 
 
-@dataclass
 class _Labels:
-    inputs: list[np.ndarray] = field(default_factory=list)
-    actions: list[int] = field(default_factory=list)
+    """
+    The labels of loop-free paths, their inputs held as single frames linked back along their episodes
+    (:class:`~sb3_disagree.acer.memory.LinkedFrames`): a stack of ``k`` frames costs one frame, so the phase's memory
+    does not grow with the policy's (ten rounds of six-frame stacks would be about 16 GB, as frames 3 GB).
+
+    :param k: Number of frames in the policy's input
+    """
+
+    def __init__(self, k: int = 1) -> None:
+        self.k = k
+        self.frames: list[np.ndarray] = []
+        self.previous: list[int] = []  # per frame, the one before it in its episode, or -1
+        self.at: list[int] = []  # per label, its step's newest frame
+        self.actions: list[int] = []
+
+    def add_episode(self, stacks: list[np.ndarray], labels: list[tuple[int, int]]) -> None:
+        """
+        Keep an episode's labels.
+
+        :param stacks: The network's input at each step of the episode (from where it was first seen)
+        :param labels: (step, action) pairs, as :func:`loop_free_labels` returns them
+        """
+        c = len(stacks[0]) // self.k
+        # The first input's k frames, oldest first (an episode under way when first seen carries its earlier
+        # frames; zeros before an episode's start are kept as zero frames), then each step's newest frame.
+        chain = [stacks[0][j * c:(j + 1) * c] for j in range(self.k)] + [x[len(x) - c:] for x in stacks[1:]]
+        positions = []
+        for frame in chain:
+            self.previous.append(len(self.frames) - 1 if positions else -1)
+            self.frames.append(frame.copy())
+            positions.append(len(self.frames) - 1)
+        steps = positions[self.k - 1:]
+        for t, action in labels:
+            self.at.append(steps[t])
+            self.actions.append(int(action))
+
+    def linked(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The frames, their links and each label's frame, as arrays."""
+        return np.stack(self.frames), np.asarray(self.previous, dtype=np.int64), np.asarray(self.at, dtype=np.int64)
+
+    @property
+    def inputs(self) -> np.ndarray:
+        """Every label's input, rebuilt (shape (labels, k * c, ...)); an empty list without labels."""
+        if not self.at:
+            return np.zeros((0,))
+        frames, previous, at = self.linked()
+        return LinkedFrames(frames, previous, self.k)[at]
 
 
 class _Trails:
     """Each env's episode under way (inputs, pose keys, actions); at its end, its loop-free path is kept as labels
     if it reached the goal."""
 
-    def __init__(self, n_envs: int) -> None:
+    def __init__(self, n_envs: int, k: int = 1) -> None:
         self.trails: list[list[tuple[np.ndarray, bytes, int]]] = [[] for _ in range(n_envs)]
-        self.labels, self.episodes, self.successes = _Labels(), 0, 0
+        self.labels, self.episodes, self.successes = _Labels(k), 0, 0
 
     def add(self, i: int, net_input: np.ndarray, key: bytes, action: int) -> None:
         self.trails[i].append((net_input.copy(), key, int(action)))
@@ -91,25 +135,25 @@ class _Trails:
         self.episodes += 1
         if success:
             self.successes += 1
-            for t, action in loop_free_labels([key for _, key, _ in trail], [a for _, _, a in trail]):
-                self.labels.inputs.append(trail[t][0])
-                self.labels.actions.append(action)
+            labels = loop_free_labels([key for _, key, _ in trail], [a for _, _, a in trail])
+            self.labels.add_episode([x for x, _, _ in trail], labels)
 
 
 class _Rounds:
-    """The labels' inputs, one array per round, indexed as one array: each round is stacked once, instead of all
-    rounds again at each fit (twice their memory at the end; ten rounds of three-frame stacks are about 8 GB)."""
+    """The labels' inputs, one linked array of frames per round, indexed as one array of stacks: each round is
+    stored once, instead of all rounds again at each fit."""
 
     def __init__(self) -> None:
-        self.parts: list[np.ndarray] = []
+        self.parts: list[tuple[LinkedFrames, np.ndarray]] = []  # per round, its frames and each label's frame
         self.ends = np.zeros(0, dtype=np.int64)
         self.starts = np.zeros(0, dtype=np.int64)
 
-    def add(self, inputs: list[np.ndarray]) -> None:
-        if inputs:
-            self.parts.append(np.stack(inputs))
-            self.ends = np.cumsum([len(part) for part in self.parts])
-            self.starts = self.ends - [len(part) for part in self.parts]
+    def add(self, labels: _Labels) -> None:
+        if labels.at:
+            frames, previous, at = labels.linked()
+            self.parts.append((LinkedFrames(frames, previous, labels.k), at))
+            self.ends = np.cumsum([len(at) for _, at in self.parts])
+            self.starts = self.ends - [len(at) for _, at in self.parts]
 
     def __len__(self) -> int:
         return int(self.ends[-1]) if len(self.ends) else 0
@@ -117,10 +161,13 @@ class _Rounds:
     def __getitem__(self, index: np.ndarray) -> np.ndarray:
         index = np.asarray(index)
         part = np.searchsorted(self.ends, index, side="right")
-        out = np.empty((len(index), *self.parts[0].shape[1:]), dtype=self.parts[0].dtype)
+        linked = self.parts[0][0]
+        out = np.empty((len(index), linked.k * linked.frames.shape[1], *linked.frames.shape[2:]),
+                       dtype=linked.frames.dtype)
         for p in np.unique(part):
             here = part == p
-            out[here] = self.parts[p][index[here] - self.starts[p]]
+            frames, at = self.parts[p]
+            out[here] = frames[at[index[here] - self.starts[p]]]
         return out
 
 
@@ -148,7 +195,7 @@ def collect_escapes(model: Any, env: VecEnv, steps: int, rng: np.random.Generato
     policy, n, k = model.policy, env.num_envs, model.policy.frame_stack
     obs = np.asarray(maybe_transpose(env.reset(), policy.observation_space))  # images: channels first, as stored
     stack = push_frames(None, obs, None, k)
-    trails = _Trails(n)
+    trails = _Trails(n, k)
     seen: list[set[bytes]] = [set() for _ in range(n)]
     for _ in range(max(steps // n, 1)):
         with th.no_grad():  # the acting network's distribution, as predict draws from it
@@ -270,7 +317,7 @@ def greedy_consistency(model: Any, env: Optional[VecEnv], rounds: int = 3, steps
     rng = np.random.default_rng(seed)
     trails = harvest.trails if harvest is not None else _Trails(0)
     inputs, actions = _Rounds(), list(trails.labels.actions)
-    inputs.add(trails.labels.inputs)
+    inputs.add(trails.labels)
 
     def fit(env_steps: int, episodes: int, successes: int, labels: int) -> RoundStats:
         stats = RoundStats(env_steps, episodes, successes, labels, float("nan"), float("nan"))
@@ -290,7 +337,7 @@ def greedy_consistency(model: Any, env: Optional[VecEnv], rounds: int = 3, steps
     history = []
     for _ in range(rounds):
         labels, counts = collect_escapes(model, env, steps, rng, sampling, loop_uniform)
-        inputs.add(labels.inputs)
+        inputs.add(labels)
         actions += labels.actions
         history.append(fit(counts["env_steps"], counts["episodes"], counts["successes"], len(labels.actions)))
     return history
@@ -315,7 +362,7 @@ class HarvestLabels(BaseCallback):
         self.trails = _Trails(0)  # what was kept: labels, episodes, successes
 
     def _init_callback(self) -> None:
-        self.trails = _Trails(self.training_env.num_envs)
+        self.trails = _Trails(self.training_env.num_envs, self.model.policy.frame_stack)
 
     def _on_step(self) -> bool:
         if self.num_timesteps <= self.start:  # num_timesteps counts this step already
