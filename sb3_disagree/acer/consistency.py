@@ -112,7 +112,7 @@ class _Labels:
 
     @property
     def inputs(self) -> np.ndarray:
-        """Every label's input, rebuilt (shape (labels, k * c, ...)); an empty list without labels."""
+        """Every label's input, rebuilt (shape (labels, k * c, ...)); an empty array without labels."""
         if not self.at:
             return np.zeros((0,))
         frames, previous, at = self.linked()
