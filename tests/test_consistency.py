@@ -131,7 +131,8 @@ def test_phase_turns_a_looping_greedy_policy_into_one_that_reaches_the_goal(fram
 
 
 class _RecordSteps(BaseCallback):
-    """Every env step of training as (observation before it, action, done, success), from what the env returned."""
+    """Every env step of training as (observation before it, action, done, success, the network's input), from what
+    the env returned and what ACER fed the network."""
 
     def _on_training_start(self) -> None:
         self.before, self.steps = self.model._last_obs.copy(), []
@@ -139,7 +140,8 @@ class _RecordSteps(BaseCallback):
     def _on_step(self) -> bool:
         infos = self.locals["infos"]
         self.steps.append((self.before, self.locals["actions"].copy(), self.locals["dones"].copy(),
-                           [bool(info.get("is_success")) for info in infos]))
+                           [bool(info.get("is_success")) for info in infos],
+                           self.locals["observations"][self.locals["step"]].copy()))
         self.before = self.locals["new_obs"].copy()
         return True
 
@@ -154,7 +156,7 @@ def test_harvest_keeps_the_loop_free_paths_of_training_episodes_after_its_start(
     expected = []
     for i in range(4):
         trail = []
-        for before, actions, dones, successes in record.steps[200:]:
+        for before, actions, dones, successes, _ in record.steps[200:]:
             trail.append((before[i], int(actions[i])))
             if dones[i]:
                 if successes[i]:
@@ -176,31 +178,17 @@ def test_harvest_keeps_the_loop_free_paths_of_training_episodes_after_its_start(
     assert len(majority) >= 5 and (_probs(model, obs).argmax(1) == np.array(list(majority.values()))).all()
 
 
-class _RecordInputs(BaseCallback):
-    """Every env step of training as (the network's input, observation before it, action, done, success)."""
-
-    def _on_training_start(self) -> None:
-        self.steps = []
-
-    def _on_step(self) -> bool:
-        infos = self.locals["infos"]
-        self.steps.append((self.locals["observations"][self.locals["step"]].copy(), self.model._last_obs.copy(),
-                           self.locals["actions"].copy(), self.locals["dones"].copy(),
-                           [bool(info.get("is_success")) for info in infos]))
-        return True
-
-
 def test_harvest_keeps_the_stacks_a_memory_policy_saw():
     # Three frames, the harvest starting in the middle of episodes: each label's input, rebuilt from single
     # frames, is the stack ACER fed the network at that step, the frames from before the harvest's start included.
     env = make_vec_env(TurnEnv, n_envs=4, seed=3)
     model = ACER("MlpPolicy", env, seed=0, n_steps=10, policy_kwargs=dict(net_arch=[32], frame_stack=3))
-    record, harvest = _RecordInputs(), HarvestLabels(start=1602)  # from the 401st step of the 4 envs on
+    record, harvest = _RecordSteps(), HarvestLabels(start=1602)  # from the 401st step of the 4 envs on
     model.learn(3000, callback=[record, harvest])
     expected, under_way = [], 0
     for i in range(4):
-        trail, first = [], not record.steps[399][3][i]
-        for net_input, before, actions, dones, successes in record.steps[400:]:
+        trail, first = [], not record.steps[399][2][i]
+        for before, actions, dones, successes, net_input in record.steps[400:]:
             trail.append((net_input[i], before[i].tobytes(), int(actions[i])))
             if dones[i]:
                 if successes[i]:

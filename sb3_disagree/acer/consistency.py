@@ -106,17 +106,18 @@ class _Labels:
             self.at.append(steps[t])
             self.actions.append(int(action))
 
-    def linked(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """The frames, their links and each label's frame, as arrays."""
-        return np.stack(self.frames), np.asarray(self.previous, dtype=np.int64), np.asarray(self.at, dtype=np.int64)
+    def linked(self) -> tuple[LinkedFrames, np.ndarray]:
+        """The frames as :class:`LinkedFrames` and each label's frame in them."""
+        frames = LinkedFrames(np.stack(self.frames), np.asarray(self.previous, dtype=np.int64), self.k)
+        return frames, np.asarray(self.at, dtype=np.int64)
 
     @property
     def inputs(self) -> np.ndarray:
         """Every label's input, rebuilt (shape (labels, k * c, ...)); an empty array without labels."""
         if not self.at:
             return np.zeros((0,))
-        frames, previous, at = self.linked()
-        return LinkedFrames(frames, previous, self.k)[at]
+        frames, at = self.linked()
+        return frames[at]
 
 
 class _Trails:
@@ -150,8 +151,7 @@ class _Rounds:
 
     def add(self, labels: _Labels) -> None:
         if labels.at:
-            frames, previous, at = labels.linked()
-            self.parts.append((LinkedFrames(frames, previous, labels.k), at))
+            self.parts.append(labels.linked())
             self.ends = np.cumsum([len(at) for _, at in self.parts])
             self.starts = self.ends - [len(at) for _, at in self.parts]
 
