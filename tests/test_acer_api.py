@@ -1,5 +1,8 @@
 """ACER in the SB3 API: save/load, replay buffer I/O, images, callbacks, logging, learning."""
 
+import io
+import zipfile
+
 import numpy as np
 import pytest
 import torch as th
@@ -64,6 +67,33 @@ def test_ema_is_the_policy_predict_acts_with_and_round_trips(tmp_path):
     assert ACER("MlpPolicy", env, **HYPER).policy.ema_net is None  # none kept by default
     with pytest.raises(ValueError, match="ema_decay"):
         ACER("MlpPolicy", env, ema_decay=1.0)
+
+
+def _saved_policy(path) -> dict:
+    with zipfile.ZipFile(path) as archive:
+        return th.load(io.BytesIO(archive.read("policy.pth")), weights_only=True)
+
+
+def test_save_stores_average_copies_of_net_once_and_load_restores_them(tmp_path):
+    env = make_vec_env(ChainEnv, n_envs=2, seed=0)
+    model = ACER("MlpPolicy", env, seed=0, ema_decay=0.9, policy_kwargs=dict(net_arch=[16]),
+                 **{**HYPER, "replay_start": 10_000})
+    full = {k: v.clone() for k, v in model.policy.state_dict().items()}
+    model.save(tmp_path / "fresh.zip")  # both averages start at net: neither is stored
+    stored = _saved_policy(tmp_path / "fresh.zip")
+    assert sorted(stored) == sorted(k for k in full if k.startswith("net."))
+    loaded = ACER.load(tmp_path / "fresh.zip").policy
+    assert list(loaded.state_dict()) == list(full) and all(th.equal(full[k], v) for k, v in loaded.state_dict().items())
+    assert all(a.data_ptr() != n.data_ptr() for a, n in zip(loaded.average_net.parameters(), loaded.net.parameters()))
+    model.policy.average_net.q_net.bias.data += 1.0  # one average entry apart from net: only it is stored
+    model.save(tmp_path / "one.zip")
+    assert set(_saved_policy(tmp_path / "one.zip")) - set(stored) == {"average_net.q_net.bias"}
+    assert th.equal(ACER.load(tmp_path / "one.zip").policy.average_net.q_net.bias, model.policy.average_net.q_net.bias)
+    model.learn(14)  # an update moves net and both averages apart
+    model.save(tmp_path / "trained.zip")
+    assert set(_saved_policy(tmp_path / "trained.zip")) == set(full)
+    assert all(th.equal(model.policy.state_dict()[k], v)
+               for k, v in ACER.load(tmp_path / "trained.zip").policy.state_dict().items())
 
 
 def test_replay_buffer_round_trip_and_continued_learning(tmp_path):

@@ -426,3 +426,23 @@ def test_the_shipped_greedy_zoo_meets_its_bar():
             assert e.card.evaluation_greedy["deterministic"] and not e.card.evaluation["deterministic"]
             assert e.card.training["method"] == "dagger" and e.card.training["consistency"]["rounds"] >= 10
             assert e.card.training.get("loop_flags") or env_id == STATE_ID  # the pose does not alias
+
+
+@pytest.mark.parametrize("name", [None, "greedy"])
+def test_shipped_priors_store_their_network_once(name):
+    """A shipped prior's file holds ``net`` alone (its averages equal it, and ``ACER.save`` leaves such copies out);
+    loaded, its average network is ``net`` again, entry for entry."""
+    import io
+    import zipfile
+
+    from sb3_disagree.acer.policies import compact_averages
+
+    entries = Zoo(name).entries()
+    assert entries
+    for e in entries:
+        with zipfile.ZipFile(e.model_path) as archive:
+            stored = th.load(io.BytesIO(archive.read("policy.pth")), weights_only=True)
+        assert not any(k.startswith("average_net.") for k in stored), e.model_path
+        assert compact_averages(stored).keys() == stored.keys()
+    policy = Zoo(name).load(entries[0], device="cpu").policy
+    assert all(th.equal(v, policy.net.state_dict()[k]) for k, v in policy.average_net.state_dict().items())

@@ -21,7 +21,7 @@ from sb3_disagree.acer.buffers import Segment, SegmentReplayBuffer
 from sb3_disagree.acer.memory import push_frames
 from sb3_disagree.acer.objectives import EPS, distillation_loss, policy_terms, retrace_targets, trust_region_project
 from sb3_disagree.acer.overlap import overlapped_updates
-from sb3_disagree.acer.policies import ACERPolicy, CnnPolicy, MlpPolicy
+from sb3_disagree.acer.policies import ACERPolicy, CnnPolicy, MlpPolicy, compact_averages
 from sb3_disagree.behaviour import BehaviourPolicy, BehaviourStep, OnPolicyBehaviour
 
 SelfACER = TypeVar("SelfACER", bound="ACER")
@@ -229,6 +229,16 @@ class ACER(BaseAlgorithm):
 
     def _get_torch_save_params(self) -> tuple[list[str], list[str]]:
         return ["policy", "policy.optimizer"], []
+
+    def get_parameters(self) -> dict[str, dict]:
+        """
+        SB3's parameters (what ``save`` writes), the policy's without the average networks' entries that equal the
+        current network's: a prior made by imitation holds ``average_net == net``, and a second copy would double
+        its file. The policy's ``load_state_dict`` takes them back from ``net``, so a save/load round trip is exact.
+        """
+        params = super().get_parameters()
+        params["policy"] = compact_averages(params["policy"])
+        return params
 
     @property
     def behaviour_policy(self) -> BehaviourPolicy:

@@ -1,6 +1,7 @@
 """ACER policies: a shared trunk with a policy head and a Q head, plus the average policy network."""
 
 import copy
+from collections.abc import Mapping
 from functools import partial
 from typing import Any, Optional, Union
 
@@ -17,6 +18,46 @@ from stable_baselines3.common.utils import polyak_update
 from torch import nn
 
 from sb3_disagree.acer.memory import push_frames, stacked_space
+
+
+AVERAGES = ("average_net.", "ema_net.")
+
+
+def compact_averages(state: dict[str, Any]) -> dict[str, Any]:
+    """
+    A policy state dict without the average networks' entries that equal the current network's.
+
+    :param state: ``ACERPolicy`` state dict, keys ``net.*``, ``average_net.*`` and maybe ``ema_net.*``
+    :return: The same dict (same order) less the redundant entries
+    """
+    def redundant(key: str, value: Any) -> bool:
+        for prefix in AVERAGES:
+            if key.startswith(prefix):
+                twin = state.get("net." + key[len(prefix):])
+                return twin is not None and twin.shape == value.shape and th.equal(twin, value)
+        return False
+
+    return type(state)((k, v) for k, v in state.items() if not redundant(k, v))
+
+
+def expand_averages(state: Mapping[str, Any], *averages: Optional[nn.Module]) -> dict[str, Any]:
+    """
+    Undo :func:`compact_averages`: each entry that an average network has and ``state`` lacks is the current
+    network's (``net.*``) entry of the same name.
+
+    :param state: A policy state dict, maybe compacted
+    :param averages: The policy's ``average_net`` and ``ema_net`` (None where not kept)
+    :return: A state dict with every average entry present where ``net``'s twin is
+    """
+    full = dict(state)
+    for prefix, module in zip(AVERAGES, averages):
+        if module is None:
+            continue
+        for name in module.state_dict():
+            twin = "net." + name
+            if prefix + name not in full and twin in full:
+                full[prefix + name] = full[twin].clone()  # never the same tensor as net's (``assign=True``)
+    return full
 
 
 def _mlp(in_dim: int, sizes: list[int], activation_fn: type[nn.Module]) -> tuple[nn.Sequential, int]:
@@ -296,6 +337,13 @@ class ACERPolicy(BasePolicy):
         """
         if self.ema_net is not None:
             polyak_update(self.net.parameters(), self.ema_net.parameters(), 1.0 - decay)
+
+    def load_state_dict(self, state_dict: Mapping[str, Any], strict: bool = True, assign: bool = False) -> Any:
+        """
+        ``nn.Module.load_state_dict``, each average-network entry that ``state_dict`` lacks taken as the current
+        network's: ``ACER.save`` leaves out the entries that equal it (:func:`compact_averages`).
+        """
+        return super().load_state_dict(expand_averages(state_dict, self.average_net, self.ema_net), strict, assign)
 
     def sync_averages(self) -> None:
         """Set the average networks to the current weights (after weights were copied into ``net``)."""
