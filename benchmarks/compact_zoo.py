@@ -3,8 +3,8 @@ Rewrite a zoo's ACER priors without the average networks' copies of ``net``, as 
 
 Each ``model.zip`` keeps every member byte for byte except ``policy.pth``, which loses the ``average_net.*`` and
 ``ema_net.*`` entries equal to ``net``'s (:func:`sb3_disagree.acer.policies.compact_averages`); the card's sha256
-follows. Before a file is replaced, the compacted state, expanded as ``ACER.load`` expands it, must equal the
-original entry for entry, so the policies that load are the same tensors.
+follows. Before a file is replaced, the new bytes loaded by ``ACER.load`` must give the original tensors, entry
+for entry, so the policies that load are the same.
 
     python benchmarks/compact_zoo.py sb3_disagree/data/zoo sb3_disagree/data/zoo-greedy
 """
@@ -17,19 +17,10 @@ from pathlib import Path
 
 import torch as th
 
-from sb3_disagree.acer.policies import AVERAGES, compact_averages
+from sb3_disagree import ACER
+from sb3_disagree.acer.policies import compact_averages
 from sb3_disagree.files import write_atomic
 from sb3_disagree.priors.zoo import sha256_of
-
-
-def expanded(state: dict, full: dict) -> dict:
-    """``state`` with the averages' missing entries taken from ``net``'s, for the keys that ``full`` holds."""
-    out = dict(state)
-    for key in full:
-        prefix = next((p for p in AVERAGES if key.startswith(p)), None)
-        if prefix is not None and key not in out:
-            out[key] = out["net." + key[len(prefix):]]
-    return out
 
 
 def compact(model_path: Path) -> tuple[int, int]:
@@ -47,15 +38,15 @@ def compact(model_path: Path) -> tuple[int, int]:
     small = compact_averages(full)
     if len(small) == len(full):
         return before, before
-    back = expanded(small, full)
-    if set(back) != set(full) or not all(th.equal(full[k], back[k]) for k in full):
-        raise SystemExit(f"{model_path}: the compacted state does not expand back to the original")
     buffer = io.BytesIO()
     th.save(small, buffer)
     out = io.BytesIO()
     with zipfile.ZipFile(out, mode="w") as archive:
         for info, data in members:
             archive.writestr(info, buffer.getvalue() if info.filename == "policy.pth" else data)
+    loaded = ACER.load(io.BytesIO(out.getvalue()), device="cpu").policy.state_dict()
+    if list(loaded) != list(full) or not all(th.equal(full[k], v) for k, v in loaded.items()):
+        raise SystemExit(f"{model_path}: the compacted file does not load to the original tensors")
     write_atomic(model_path, out.getvalue())
     card_path = model_path.with_name("card.json")
     card = json.loads(card_path.read_text())
