@@ -1,6 +1,8 @@
 """The prior zoo and `dopt priors`: cards, checks, atomic writes, error cases, the CLI."""
 
+import io
 import json
+import zipfile
 from pathlib import Path
 
 import gymnasium as gym
@@ -12,6 +14,7 @@ from typer.testing import CliRunner
 
 import sb3_disagree.envs  # noqa: F401
 from sb3_disagree import ACER
+from sb3_disagree.acer.policies import compact_averages
 from sb3_disagree.cli.app import app
 from sb3_disagree.priors.zoo import Zoo, ZooError, identify_algorithm
 
@@ -432,11 +435,6 @@ def test_the_shipped_greedy_zoo_meets_its_bar():
 def test_shipped_priors_store_their_network_once(name):
     """A shipped prior's file holds ``net`` alone (its averages equal it, and ``ACER.save`` leaves such copies out);
     loaded, its average network is ``net`` again, entry for entry."""
-    import io
-    import zipfile
-
-    from sb3_disagree.acer.policies import compact_averages
-
     entries = Zoo(name).entries()
     assert entries
     for e in entries:
