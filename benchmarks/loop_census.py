@@ -25,6 +25,9 @@ def census(model: ACER, env_id: str, goal: str, episodes: int, seed: int, determ
     env = make_vec_env(env_id, n_envs=4, seed=seed, env_kwargs=dict(goal=goal))
     obs, state, starts = env.reset(), None, np.ones(4, dtype=bool)
     trails: list[list[tuple[bytes, int]]] = [[] for _ in range(4)]
+    # Each env's first episodes, as SB3's evaluate_policy counts them: the first episodes to end over all envs would
+    # be the short ones, and failures (which run to the cut) would be undercounted.
+    targets = [(episodes + i) // 4 for i in range(4)]
     ended: list[dict] = []
     while len(ended) < episodes:
         actions, state = model.predict(obs, state=state, episode_start=starts, deterministic=deterministic)
@@ -34,6 +37,9 @@ def census(model: ACER, env_id: str, goal: str, episodes: int, seed: int, determ
             trails[i].append((keys[i], int(actions[i])))
             if starts[i]:
                 trail, trails[i] = trails[i], []
+                if targets[i] == 0:
+                    continue
+                targets[i] -= 1
                 seen: set[bytes] = set()
                 repeats = 0
                 for key, _ in trail:
@@ -42,7 +48,7 @@ def census(model: ACER, env_id: str, goal: str, episodes: int, seed: int, determ
                 ended.append({"success": bool(infos[i].get("is_success")), "length": len(trail), "repeats": repeats,
                               "distinct_last_60": len({key for key, _ in trail[-60:]}),
                               "actions": np.bincount([a for _, a in trail], minlength=3).tolist()})
-    return ended[:episodes]
+    return ended
 
 
 def main() -> None:
