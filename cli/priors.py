@@ -109,8 +109,10 @@ def _zoo_table(entries: list, goal: Optional[str], sims: dict[str, float], chose
 
 
 def _memory(training: dict) -> str:
-    """The prior's memory, in observations ("3+flags" for loop flags over a stack of three)."""
-    return str(training.get("frame_stack", 1)) + ("+flags" if training.get("loop_flags") else "")
+    """The prior's memory, in observations ("3+flags" for loop flags over a stack of three, the CNN on the newest
+    frame; "3 all+flags" with the CNN on all three)."""
+    flags = " all+flags" if training.get("flags_cnn") == "stack" else "+flags"
+    return str(training.get("frame_stack", 1)) + (flags if training.get("loop_flags") else "")
 
 
 @app.command()
@@ -189,7 +191,8 @@ def _make_options() -> list:
                                                  "consistency_loop_uniform"),
                         flags={"env_id": "--env"}, defaults={"env_id": DEFAULT_ENV}),
             *options_of(train_dagger, only=("rounds", "steps_per_round", "epochs", "final_epochs",
-                                            "validation_episodes", "learner_actions", "frame_stack", "loop_flags"),
+                                            "validation_episodes", "learner_actions", "frame_stack", "loop_flags",
+                                            "flags_cnn"),
                         flags={"loop_flags": "--loop-flags/--no-loop-flags"},
                         helps={k: "DAgger: " + v for k, v in param_help(train_dagger).items()}),
             *options_of(list_priors, only=("zoo",))]
@@ -205,7 +208,7 @@ def train(**options) -> None:
         goal, method, zoo = options.pop("goal"), options.pop("method"), options.pop("zoo")
         dagger = {k: options.pop(k) for k in ("rounds", "steps_per_round", "epochs", "final_epochs",
                                               "validation_episodes", "learner_actions", "frame_stack",
-                                              "loop_flags")}
+                                              "loop_flags", "flags_cnn")}
         with _progress() as progress:
             # a line per round, and one each for the kept round and the final epochs where there are any
             lines = dagger["rounds"] + (dagger["validation_episodes"] > 0) + (dagger["final_epochs"] > 0)

@@ -236,6 +236,28 @@ def test_loop_flags_say_which_older_frames_the_newest_equals():
         LoopFlagsCNN(space, frame_stack=2)
 
 
+def test_loop_flags_with_the_cnn_on_the_whole_stack():
+    """cnn_sees="stack": the CNN reads every frame in order (two stacks with the same newest frame and flags differ
+    in their features), the flags are the same as with the newest frame alone, and a bad value is refused."""
+    from gymnasium import spaces
+
+    from sb3_disagree.acer.torch_layers import LoopFlagsCNN
+
+    space = spaces.Box(0, 255, (9, 40, 40), dtype=np.uint8)
+    th.manual_seed(0)
+    extractor = LoopFlagsCNN(space, frame_stack=3, features_dim=16, cnn_sees="stack")
+    assert extractor.cnn.cnn[0].in_channels == 9 and extractor.features_dim == 16 + 2
+    rng = np.random.default_rng(0)
+    a, b, c = (rng.integers(0, 256, (3, 40, 40), dtype=np.uint8) for _ in range(3))
+    stacks = th.as_tensor(np.stack([np.concatenate(f) for f in [(a, b, c), (b, a, c), (a, c, c)]]))
+    features = extractor(stacks)
+    assert features[:, 16:].tolist() == [[0, 0], [0, 0], [1, 0]]
+    assert not th.allclose(features[0, :16], features[1, :16])  # the order of the older frames reaches the CNN
+    assert th.allclose(features[:, :16], extractor.cnn(stacks.float() / 255))
+    with pytest.raises(ValueError, match="cnn_sees must be one of"):
+        LoopFlagsCNN(space, frame_stack=3, cnn_sees="oldest")
+
+
 def test_a_loop_flags_policy_round_trips_through_save_load_and_evaluate_policy(tmp_path):
     from sb3_disagree.acer.torch_layers import LoopFlagsCNN
 

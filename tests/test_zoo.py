@@ -282,6 +282,20 @@ def test_cli_train_dagger_with_loop_flags(tmp_path):
         expected = prior.policy.get_distribution(stack).distribution.probs
         assert th.equal(extractor.flags(stack), th.tensor([[1.0, 0.0]] * 2))
     assert probs.shape == (2, 2, 3) and th.allclose(probs[0], expected) and th.allclose(probs[1], expected)
+    # --flags-cnn stack: the CNN reads all three frames, the flags on top; refused without --loop-flags.
+    for bad in (["--frame-stack", "3", "--flags-cnn", "stack"], ["--frame-stack", "3", "--loop-flags", "--flags-cnn", "x"]):
+        result = runner.invoke(app, [*base, "--goal", "bed", *bad])
+        assert result.exit_code == 2 and "--flags-cnn must be one of" in result.output, result.output
+    assert "bed" not in [e.goal for e in Zoo(tmp_path).entries()]
+    result = runner.invoke(app, [*base, "--goal", "bed", "--frame-stack", "3", "--loop-flags", "--flags-cnn", "stack"])
+    assert result.exit_code == 0, result.output
+    entry = Zoo(tmp_path).get("bed", "sb3_disagree/Apartment-v0")
+    assert entry.card.training["flags_cnn"] == "stack"
+    listed = runner.invoke(app, ["priors", "list", "--zoo", str(tmp_path)], env={"COLUMNS": "200"}).output
+    row = next(line for line in listed.splitlines() if "bed" in line)
+    assert [c.strip() for c in row.split("│")][5] == "3 all+flags"
+    extractor = Zoo(tmp_path).load(entry, device="cpu").policy.net.features_extractor
+    assert extractor.cnn.cnn[0].in_channels == 9 and extractor.features_dim == 128 + 2
 
 
 def test_cli_train_prior_with_consistency_phase(tmp_path):

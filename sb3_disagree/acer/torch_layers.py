@@ -6,17 +6,20 @@ import torch as th
 from gymnasium import spaces
 from stable_baselines3.common.torch_layers import BaseFeaturesExtractor, NatureCNN
 
+CNN_SEES = ("newest", "stack")  # what LoopFlagsCNN's CNN sees of the stack
+
 
 class LoopFlagsCNN(BaseFeaturesExtractor):
     """
-    NatureCNN on the newest frame of a stack of ``k`` frames, with ``k - 1`` flags appended to its features: for
-    each older frame of the stack, 1 where the newest frame equals it (pixel for pixel), else 0.
+    NatureCNN on the newest frame of a stack of ``k`` frames (or on the whole stack), with ``k - 1`` flags appended
+    to its features: for each older frame of the stack, 1 where the newest frame equals it (pixel for pixel), else 0.
 
     A memoryless greedy policy fails in short cycles of poses: pressed against a wall (the frame stays the same,
     flag 1 on) or turning left and right between two poses (the frame equals the one two steps back, flag 2 on),
     while the single frame looks like open floor. The flags tell those states apart at the cost of one CNN pass on
     one frame (a CNN over the whole stack costs more and must learn frame identity from data). Frames from before
-    an episode's start are zeros and equal no rendered frame.
+    an episode's start are zeros and equal no rendered frame. With ``cnn_sees="stack"`` the CNN sees every frame
+    too: the order of the poses, which tells the two ends of a left/right cycle apart, and the flags on top.
 
     It takes the stack as stored (``uint8``, as ``ACERPolicy.extract_features`` hands it over: ``takes_raw_images``),
     compares frames byte for byte and scales only the newest frame (``x / 255``, as SB3's preprocessing does); a
@@ -26,10 +29,13 @@ class LoopFlagsCNN(BaseFeaturesExtractor):
     :param frame_stack: ``k``, the frames in the stack (>= 2)
     :param features_dim: Features of the CNN (the flags come on top)
     :param normalized_image: As NatureCNN's
+    :param cnn_sees: What the CNN sees: "newest" (the newest frame) or "stack" (every frame, oldest first)
     """
 
     def __init__(self, observation_space: spaces.Box, frame_stack: int = 2, features_dim: int = 512,
-                 normalized_image: bool = False) -> None:
+                 normalized_image: bool = False, cnn_sees: str = "newest") -> None:
+        if cnn_sees not in CNN_SEES:
+            raise ValueError(f"cnn_sees must be one of {CNN_SEES}, got {cnn_sees!r}")
         if frame_stack < 2:
             raise ValueError(f"loop flags compare the newest frame with older ones: frame_stack must be >= 2, got {frame_stack}")
         channels = observation_space.shape[0]
@@ -38,9 +44,10 @@ class LoopFlagsCNN(BaseFeaturesExtractor):
         super().__init__(observation_space, features_dim + frame_stack - 1)
         self.takes_raw_images = True
         self.k, self.c = frame_stack, channels // frame_stack
-        newest = spaces.Box(low=observation_space.low[-self.c:], high=observation_space.high[-self.c:],
-                            dtype=observation_space.dtype)  # type: ignore[arg-type]
-        self.cnn = NatureCNN(newest, features_dim=features_dim, normalized_image=normalized_image)
+        self.seen = channels if cnn_sees == "stack" else self.c  # the CNN's channels, the newest last
+        seen = spaces.Box(low=observation_space.low[-self.seen:], high=observation_space.high[-self.seen:],
+                          dtype=observation_space.dtype)  # type: ignore[arg-type]
+        self.cnn = NatureCNN(seen, features_dim=features_dim, normalized_image=normalized_image)
 
     def flags(self, observations: th.Tensor) -> th.Tensor:
         """
@@ -58,10 +65,10 @@ class LoopFlagsCNN(BaseFeaturesExtractor):
         return ((older - newest).abs().amax(2) < 1e-4).float()
 
     def forward(self, observations: th.Tensor) -> th.Tensor:
-        newest = observations[:, -self.c:]
-        if newest.dtype == th.uint8:
-            newest = newest.float() / 255.0
-        return th.cat([self.cnn(newest), self.flags(observations)], dim=1)
+        seen = observations[:, -self.seen:]
+        if seen.dtype == th.uint8:
+            seen = seen.float() / 255.0
+        return th.cat([self.cnn(seen), self.flags(observations)], dim=1)
 
 
 def loop_flags_kwargs(frame_stack: int, **extractor_kwargs: Any) -> dict[str, Any]:

@@ -20,7 +20,7 @@ from stable_baselines3.common.vec_env import VecEnv
 
 from sb3_disagree.acer import ACER
 from sb3_disagree.acer.memory import LinkedFrames, push_frames
-from sb3_disagree.acer.torch_layers import loop_flags_kwargs
+from sb3_disagree.acer.torch_layers import CNN_SEES, loop_flags_kwargs
 from sb3_disagree.defaults import PRIOR_VALIDATION_SEED
 from sb3_disagree.envs.vec import make_vec
 from sb3_disagree.evaluation import Evaluation, evaluate
@@ -50,6 +50,7 @@ def train_dagger(
     learner_actions: str = "sampled",
     frame_stack: int = 1,
     loop_flags: bool = False,
+    flags_cnn: str = "newest",
     progress: Optional[Callable[[str], None]] = None,
 ) -> tuple[ACER, dict[str, Any]]:
     """
@@ -80,6 +81,8 @@ def train_dagger(
     :param loop_flags: The policy's CNN sees the newest frame, and flags say whether it equals each older frame of
         the stack (``LoopFlagsCNN``: pressed against a wall, turning back and forth); needs ``frame_stack`` >= 2
         and image observations
+    :param flags_cnn: With loop flags, what the CNN sees: "newest" (the newest frame) or "stack" (every frame of the
+        stack, as without flags)
     :param progress: Called with a line of text after each round
     :return: An ACER model whose policy imitates the expert, and a record of the training
     """
@@ -88,11 +91,15 @@ def train_dagger(
     greedy = learner_actions == "greedy"
     name = policy_name(env)
     policy_kwargs = dict(PRIOR_POLICY_KWARGS[name], frame_stack=frame_stack)
+    if flags_cnn not in CNN_SEES or (flags_cnn != "newest" and not loop_flags):
+        raise ValueError(f"--flags-cnn must be one of {CNN_SEES}, and 'stack' needs --loop-flags; got {flags_cnn!r}"
+                         f"{'' if loop_flags else ' without --loop-flags'}")
     if loop_flags:
         if frame_stack < 2 or name != "CnnPolicy":
             raise ValueError("loop flags compare the newest frame with older ones: they need --frame-stack >= 2 and "
                              f"image observations, got {frame_stack} frame(s) of {env.observation_space}")
-        policy_kwargs.update(loop_flags_kwargs(frame_stack, **policy_kwargs["features_extractor_kwargs"]))
+        policy_kwargs.update(loop_flags_kwargs(frame_stack, **policy_kwargs["features_extractor_kwargs"],
+                                               cnn_sees=flags_cnn))
     model = ACER(name, env, seed=seed, policy_kwargs=policy_kwargs)
     env = model.get_env()  # as the policy sees it (channel-first images)
     policy = model.policy
@@ -150,7 +157,7 @@ def train_dagger(
             progress(line)
     record = {"method": "dagger", "steps": int(len(y)), "seed": seed, "rounds": rounds, "epochs": epochs,
               "final_epochs": final_epochs, "learner_actions": learner_actions, "frame_stack": frame_stack,
-              "loop_flags": loop_flags}
+              "loop_flags": loop_flags, **({"flags_cnn": flags_cnn} if loop_flags else {})}
     if validation:
         selected = int(np.flatnonzero(np.asarray(validation) == max(validation))[-1])
         policy.net.load_state_dict(best)

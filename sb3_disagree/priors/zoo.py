@@ -55,8 +55,9 @@ DISTRIBUTION_CLASSES = {
 
 def _memory_of(policy: Any) -> dict[str, Any]:
     """
-    A policy's memory as a card's training record names it (``frame_stack``, ``loop_flags``), where it has one: a
-    model added from outside has no record of how it was made, and ``dopt priors list`` shows its memory from these.
+    A policy's memory as a card's training record names it (``frame_stack``, ``loop_flags``, ``flags_cnn``), where it
+    has one: a model added from outside has no record of how it was made, and ``dopt priors list`` shows its memory
+    from these.
 
     :param policy: The loaded model's policy
     :return: ``{}`` for a single-frame policy
@@ -66,7 +67,10 @@ def _memory_of(policy: Any) -> dict[str, Any]:
     frame_stack = int(getattr(policy, "frame_stack", 1))
     if frame_stack <= 1:
         return {}
-    return {"frame_stack": frame_stack, "loop_flags": getattr(policy, "features_extractor_class", None) is LoopFlagsCNN}
+    if getattr(policy, "features_extractor_class", None) is not LoopFlagsCNN:
+        return {"frame_stack": frame_stack, "loop_flags": False}
+    return {"frame_stack": frame_stack, "loop_flags": True,
+            "flags_cnn": policy.features_extractor_kwargs.get("cnn_sees", "newest")}
 
 
 class ZooError(ValueError):
