@@ -188,7 +188,7 @@ def _make_options() -> list:
 
     return [*options_of(make_prior, only=("goal", "method", "env_id", "steps", "n_envs", "seed", "episodes", "replace",
                                                  "consistency_rounds", "consistency_steps",
-                                                 "consistency_loop_uniform"),
+                                                 "consistency_loop_uniform", "consistency_validation_episodes"),
                         flags={"env_id": "--env"}, defaults={"env_id": DEFAULT_ENV}),
             *options_of(train_dagger, only=("rounds", "steps_per_round", "epochs", "final_epochs",
                                             "validation_episodes", "learner_actions", "frame_stack", "loop_flags",
@@ -212,7 +212,9 @@ def train(**options) -> None:
         with _progress() as progress:
             # a line per round, and one each for the kept round and the final epochs where there are any
             lines = dagger["rounds"] + (dagger["validation_episodes"] > 0) + (dagger["final_epochs"] > 0)
-            total = (lines if method == "dagger" else 1) + options["consistency_rounds"]
+            phase = options["consistency_rounds"]
+            kept = phase > 0 and options["consistency_validation_episodes"] > 0  # the line of the kept round
+            total = (lines if method == "dagger" else 1) + phase + kept
             task = progress.add_task(f"{method} {goal}", total=total)
             entry, evaluations = make_prior(_zoo(zoo), goal, method=method, command=command_line(),
                                             progress=lambda line: (progress.advance(task), console.print(line)),
@@ -224,7 +226,7 @@ def _refine_options() -> list:
     from sb3_disagree.priors.make import refine_entry
 
     return [*options_of(refine_entry, only=("goal", "env_id", "rounds", "steps", "loop_uniform", "n_envs", "seed",
-                                            "episodes", "only_if_better"),
+                                            "episodes", "only_if_better", "validation_episodes"),
                         flags={"env_id": "--env"}, defaults={"env_id": DEFAULT_ENV}),
             *options_of(list_priors, only=("zoo",))]
 
@@ -239,7 +241,7 @@ def refine(**options) -> None:
 
         goal, zoo = options.pop("goal"), options.pop("zoo")
         with _progress() as progress:
-            task = progress.add_task(f"refining {goal}", total=options["rounds"])
+            task = progress.add_task(f"refining {goal}", total=options["rounds"] + (options["validation_episodes"] > 0))
             entry, evaluations, replaced = refine_entry(
                 _zoo(zoo), goal, command=command_line(),
                 progress=lambda line: (progress.advance(task), console.print(line)), **options)

@@ -319,6 +319,59 @@ def test_cli_train_prior_with_consistency_phase(tmp_path):
     assert " ".join(result.output.split()).count("consistency round:") == 2
 
 
+def test_a_validated_phase_ends_on_its_best_round(tmp_path):
+    """A phase with validation episodes validates every epoch greedily from DAgger's validation starts; each round
+    keeps its best epoch and the phase its best round (ties: the later), whose weights the prior ends with (validated
+    again, it scores what was recorded); a negative count is refused by both commands before anything is written."""
+    from sb3_disagree.defaults import PRIOR_VALIDATION_SEED
+    from sb3_disagree.envs.vec import make_vec
+    from sb3_disagree.evaluation import evaluate
+    from sb3_disagree.priors.make import refine_prior
+
+    for bad in (["train", "--goal", "toilet", "--consistency-rounds", "1", "--consistency-validation-episodes", "-1"],
+                ["refine", "--goal", "toilet", "--rounds", "1", "--validation-episodes", "-1"]):
+        result = runner.invoke(app, ["priors", *bad, "--env", STATE_ID, "--zoo", str(tmp_path)])
+        assert result.exit_code == 2 and "validation-episodes >= 0" in result.output, result.output
+    assert not list(tmp_path.iterdir())
+    greedy = Zoo("greedy")
+    model = greedy.load(greedy.get("toilet", STATE_ID), device="cpu")
+    lines: list[str] = []
+    phase = refine_prior(model, STATE_ID, "toilet", rounds=3, steps=800, seed=1, progress=lines.append,
+                         validation_episodes=8)
+    kept = [r["validation"][int(r["epoch"]) - 1] for r in phase["per_round"]]
+    assert [len(r["validation"]) for r in phase["per_round"]] == [3, 3, 3]  # three epochs a round
+    assert all(k == max(r["validation"]) for k, r in zip(kept, phase["per_round"]))
+    assert phase["selected_round"] == max(i + 1 for i, k in enumerate(kept) if k == max(kept))
+    assert phase["validation_episodes"] == 8 and phase["validation_seed"] == PRIOR_VALIDATION_SEED
+    assert lines[-1].startswith(f"kept consistency round {phase['selected_round']}")
+    env = make_vec(STATE_ID, "toilet", n_envs=4, seed=PRIOR_VALIDATION_SEED)
+    assert evaluate(model, env, 8, deterministic=True).success_rate == max(kept)
+
+
+def test_a_validated_phase_keeps_the_best_epoch_and_then_the_best_round(monkeypatch):
+    """With scripted validation scores, the phase keeps each round's best epoch (ties: the shorter episodes, then the
+    earlier epoch) and ends on the weights of its best round (ties: the later), not on its last round's."""
+    import types
+
+    import sb3_disagree.priors.make as make
+
+    scores = iter([0.5, 0.75, 0.25,  # round 1 keeps epoch 2
+                   0.25, 0.5, 0.5,  # round 2: epoch 2 (a tie, the same lengths)
+                   0.75, 0.25, 0.75,  # round 3: epoch 1, tied with round 1: round 3 is kept
+                   0.5, 0.25, 0.5])  # round 4: below, so the phase ends on round 3's weights
+    monkeypatch.setattr(make, "evaluate", lambda *args, **kwargs: types.SimpleNamespace(success_rate=next(scores),
+                                                                                         mean_length=100.0))
+    greedy = Zoo("greedy")
+    model = greedy.load(greedy.get("toilet", STATE_ID), device="cpu")
+    net, after = model.policy.acting_net, []
+    phase = make.refine_prior(model, STATE_ID, "toilet", rounds=4, steps=400, seed=1, validation_episodes=8,
+                              progress=lambda line: after.append({k: v.clone() for k, v in net.state_dict().items()}))
+    assert [r["epoch"] for r in phase["per_round"]] == [2, 2, 1, 1] and phase["selected_round"] == 3
+    final = net.state_dict()
+    assert all(th.equal(final[k], after[2][k]) for k in final)
+    assert not all(th.equal(final[k], after[3][k]) for k in final)
+
+
 def test_refine_is_the_second_half_of_training_with_the_phase(tmp_path):
     """DAgger into the zoo, then refine_entry with the same seed, gives the very prior (weights and the phase's
     record) that make_prior with --consistency-rounds gives in one go."""

@@ -254,7 +254,8 @@ def _evaluate_model(load: Callable[[VecEnv], BaseAlgorithm], entry: Any, episode
 
 def make_prior(zoo: Any, goal: str, env_id: str, method: str = "dagger", steps: int = 200_000, n_envs: int = 4,
                seed: int = 0, episodes: int = 100, replace: bool = False, consistency_rounds: int = 0,
-               consistency_steps: int = 20_000, consistency_loop_uniform: float = 0.5, command: str = "",
+               consistency_steps: int = 20_000, consistency_loop_uniform: float = 0.5,
+               consistency_validation_episodes: int = 0, command: str = "",
                progress: Optional[Callable[[str], None]] = None, **dagger_kwargs: Any) -> tuple[Any, dict[str, Any]]:
     """
     Train a prior, add it to the zoo, and record its evaluation alone (greedy and sampled) on its card: what
@@ -275,6 +276,8 @@ def make_prior(zoo: Any, goal: str, env_id: str, method: str = "dagger", steps: 
     :param consistency_steps: Env steps per round of that phase
     :param consistency_loop_uniform: In a loop, the phase draws from ``(1 - u) pi + u / n``: a prior imitating an
         expert is sharp, and sampling from pi alone where it turns back and forth repeats the turn
+    :param consistency_validation_episodes: Greedy validation episodes after each epoch of that phase, from
+        DAgger's validation starts: each round keeps its best epoch and the phase its best round (0: none)
     :param command: The command that made it, for the card
     :param progress: Called with a line of text as training goes (DAgger's rounds, the phase's rounds)
     :param dagger_kwargs: :func:`train_dagger`'s own settings (rounds, epochs, validation_episodes, ...)
@@ -288,10 +291,12 @@ def make_prior(zoo: Any, goal: str, env_id: str, method: str = "dagger", steps: 
         raise ValueError(f"the zoo already has a prior for {goal!r} in {env_id}; pass --replace to retrain it")
     if dagger_kwargs.get("validation_episodes", 0) < 0:
         raise ValueError(f"--validation-episodes must be >= 0, got {dagger_kwargs['validation_episodes']}")
-    if consistency_rounds < 0 or (consistency_rounds and consistency_steps < n_envs) or not 0 <= consistency_loop_uniform <= 1:
-        raise ValueError(f"--consistency-rounds must be >= 0, --consistency-steps >= {n_envs} (one per env) and "
-                         f"--consistency-loop-uniform in [0, 1], got {consistency_rounds}, {consistency_steps} and "
-                         f"{consistency_loop_uniform}")
+    if (consistency_rounds < 0 or (consistency_rounds and consistency_steps < n_envs)
+            or not 0 <= consistency_loop_uniform <= 1 or consistency_validation_episodes < 0):
+        raise ValueError(f"--consistency-rounds must be >= 0, --consistency-steps >= {n_envs} (one per env), "
+                         f"--consistency-loop-uniform in [0, 1] and --consistency-validation-episodes >= 0, got "
+                         f"{consistency_rounds}, {consistency_steps}, {consistency_loop_uniform} and "
+                         f"{consistency_validation_episodes}")
     if consistency_rounds and method == "ppo":
         raise ValueError("the greedy-consistency phase refines an ACER policy (--method dagger or acer), not PPO")
     venv = make_vec(env_id, goal, n_envs=n_envs, seed=seed)
@@ -305,42 +310,77 @@ def make_prior(zoo: Any, goal: str, env_id: str, method: str = "dagger", steps: 
     venv.close()
     if consistency_rounds:
         record["consistency"] = refine_prior(model, env_id, goal, consistency_rounds, consistency_steps,
-                                             consistency_loop_uniform, n_envs, seed, progress)
+                                             consistency_loop_uniform, n_envs, seed, progress,
+                                             consistency_validation_episodes)
     entry = _add_model(zoo, model, goal, env_id, record, command, replace)
     return record_evaluations(zoo, entry, episodes) if episodes else (entry, {})
 
 
 def refine_prior(model: ACER, env_id: str, goal: str, rounds: int, steps: int, loop_uniform: float = 0.5,
-                 n_envs: int = 4, seed: int = 0, progress: Optional[Callable[[str], None]] = None) -> dict[str, Any]:
+                 n_envs: int = 4, seed: int = 0, progress: Optional[Callable[[str], None]] = None,
+                 validation_episodes: int = 0) -> dict[str, Any]:
     """
     The greedy-consistency phase (:func:`~sb3_disagree.acer.consistency.greedy_consistency`, three epochs a round)
     on a trained prior, in place, on env seeds ``seed + CONSISTENCY_SEED_OFFSET``, apart from its training, its
     validation and its card's; in a loop it draws from ``(1 - loop_uniform) pi + loop_uniform / n``.
 
+    :param validation_episodes: With > 0, each fit is validated greedily after every epoch over this many episodes
+        from DAgger's validation starts (env seed ``PRIOR_VALIDATION_SEED``, the env's own step limit) and keeps its
+        best epoch, and the phase ends on the best round's weights (ties: the later round), as DAgger keeps its
+        best round; 0: the last epoch of the last round
     :return: The phase's record for the card: its settings, seconds and per-round statistics
     """
     from sb3_disagree.acer.consistency import greedy_consistency
     from sb3_disagree.defaults import CONSISTENCY_SEED_OFFSET
 
+    net, best, done = model.policy.acting_net, None, 0
+
     def on_round(stats: Any) -> None:
+        nonlocal best, done
+        done += 1
+        line = (f"consistency round: {stats.successes}/{stats.episodes} episodes reached the goal, "
+                f"{stats.labels} labels, accuracy {stats.accuracy:.3f}")
+        if stats.validation:
+            kept = stats.validation[stats.epoch - 1]
+            line += f", validation success {kept:.2f} (epoch {stats.epoch})"
+            if best is None or kept >= best[0]:
+                best = (kept, done, {k: v.clone() for k, v in net.state_dict().items()})
         if progress:
-            progress(f"consistency round: {stats.successes}/{stats.episodes} episodes reached the goal, "
-                     f"{stats.labels} labels, accuracy {stats.accuracy:.3f}")
+            progress(line)
+
+    validate = None
+    if validation_episodes > 0:
+        validation_env = make_vec(env_id, goal, n_envs=n_envs, seed=PRIOR_VALIDATION_SEED)
+
+        def validate() -> tuple[float, float]:
+            validation_env.seed(PRIOR_VALIDATION_SEED)  # the same starts at every validation
+            result = evaluate(model, validation_env, validation_episodes, deterministic=True)
+            return result.success_rate, result.mean_length
 
     env = make_vec(env_id, goal, n_envs=n_envs, seed=seed + CONSISTENCY_SEED_OFFSET)
     start = time.perf_counter()
     try:
-        history = greedy_consistency(model, env, rounds, steps, seed=seed, on_round=on_round, loop_uniform=loop_uniform)
+        history = greedy_consistency(model, env, rounds, steps, seed=seed, on_round=on_round, loop_uniform=loop_uniform,
+                                     validate=validate)
     finally:
         env.close()
+        if validate is not None:
+            validation_env.close()
+    record = {"rounds": rounds, "steps_per_round": steps, "loop_uniform": loop_uniform}
+    if best is not None:
+        net.load_state_dict(best[2])
+        record.update(validation_episodes=validation_episodes, validation_seed=PRIOR_VALIDATION_SEED,
+                      selected_round=best[1])
+        if progress:
+            progress(f"kept consistency round {best[1]} (validation success {best[0]:.2f})")
     model.policy.sync_averages()  # the average network follows the fitted one, as after DAgger
-    return {"rounds": rounds, "steps_per_round": steps, "loop_uniform": loop_uniform,
-            "seconds": round(time.perf_counter() - start, 1), "per_round": [r.as_dict() for r in history]}
+    return {**record, "seconds": round(time.perf_counter() - start, 1), "per_round": [r.as_dict() for r in history]}
 
 
 def refine_entry(zoo: Any, goal: str, env_id: str, rounds: int, steps: int = 20_000, loop_uniform: float = 0.5,
                  n_envs: int = 4, seed: int = 0, episodes: int = 100, only_if_better: bool = False, command: str = "",
-                 progress: Optional[Callable[[str], None]] = None) -> tuple[Any, dict[str, Evaluation], bool]:
+                 progress: Optional[Callable[[str], None]] = None,
+                 validation_episodes: int = 0) -> tuple[Any, dict[str, Evaluation], bool]:
     """
     The greedy-consistency phase (:func:`refine_prior`) on a prior already in the zoo, which it replaces: the card keeps
     how the prior was trained, adds the phase (with the evaluations it replaces, under ``before``), and records the
@@ -363,14 +403,17 @@ def refine_entry(zoo: Any, goal: str, env_id: str, rounds: int, steps: int = 20_
         a fragile function of its weights), and the prior it would replace is otherwise lost
     :param command: The command that refined it, added to the card's command
     :param progress: Called with a line of text after each round
+    :param validation_episodes: Greedy validation episodes after each epoch, from DAgger's validation starts: each
+        round keeps its best epoch and the phase its best round (0: none; :func:`refine_prior`)
     :return: The zoo entry (as read back), the refined prior's evaluations by label ("greedy", "sampled"), and
         whether it replaced the prior
     """
     from sb3_disagree.defaults import PRIOR_CARD_SEED
 
-    if rounds < 1 or steps < n_envs or not 0 <= loop_uniform <= 1 or episodes < 0:
-        raise ValueError(f"--rounds must be >= 1, --steps >= {n_envs} (one per env), --loop-uniform in [0, 1] and "
-                         f"--episodes >= 0, got {rounds}, {steps}, {loop_uniform} and {episodes}")
+    if rounds < 1 or steps < n_envs or not 0 <= loop_uniform <= 1 or episodes < 0 or validation_episodes < 0:
+        raise ValueError(f"--rounds must be >= 1, --steps >= {n_envs} (one per env), --loop-uniform in [0, 1], "
+                         f"--episodes >= 0 and --validation-episodes >= 0, got {rounds}, {steps}, {loop_uniform}, "
+                         f"{episodes} and {validation_episodes}")
     entry = zoo.get(goal, env_id)
     model = zoo.load(entry, device="auto")  # refuses an entry with a problem
     if not isinstance(model, ACER):
@@ -383,7 +426,7 @@ def refine_entry(zoo: Any, goal: str, env_id: str, rounds: int, steps: int = 20_
                          f"({episodes}) from seed {PRIOR_CARD_SEED}, and {goal!r}'s card has no such pair: run "
                          f"dopt priors eval {goal} --episodes {episodes} --record first, or change --episodes")
     record = dict(entry.card.training or {})
-    phase = refine_prior(model, env_id, goal, rounds, steps, loop_uniform, n_envs, seed, progress)
+    phase = refine_prior(model, env_id, goal, rounds, steps, loop_uniform, n_envs, seed, progress, validation_episodes)
     evaluations = {label: _evaluate_model(lambda _: model, entry, episodes, label == "greedy", PRIOR_CARD_SEED)
                    for label in ("greedy", "sampled")} if episodes else {}
     if only_if_better and (min(ev.success_rate for ev in evaluations.values())
