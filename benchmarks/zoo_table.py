@@ -9,7 +9,7 @@ import argparse
 
 from docs_section import write_section
 
-from sb3_disagree.priors.zoo import Zoo
+from sb3_disagree.priors.zoo import Zoo, memory_label
 
 
 def _success(ev: dict) -> str:
@@ -36,7 +36,7 @@ def main() -> None:
             rows.append(f"| {e.goal} | {e.env_id} | - | - | - | - | - | - | - | - | {e.problem} |")
             continue
         tr = card.training
-        memory = f"{tr.get('frame_stack', 1)}{'+flags' if tr.get('loop_flags') else ''}"
+        memory = memory_label(tr)
         phase = sum(p.get("rounds", 0) for p in [tr.get("consistency") or {}, *tr.get("consistency_more", [])])
         rows.append(
             f"| {e.goal} | {e.env_id} | {tr.get('method', '?')} | {tr.get('steps', '?')} | {memory} | {phase} | "
@@ -51,7 +51,7 @@ def main() -> None:
         "start distribution (the apartment: random corridor poses; the office: random poses anywhere on the "
         "floor), over the episodes on the card (env seeds 10000+): greedy (SB3's default; \"-\" where the card "
         "has no greedy evaluation yet: `dopt priors eval GOAL --episodes 300 --record` adds it) and sampled, "
-        "as the method follows priors. Memory: frames the prior sees (`+flags`: the newest frame and loop flags). "
+        "as the method follows priors. Memory: frames the prior sees (`+flags`: the newest frame and loop flags; `all+flags`: every frame and loop flags). "
         "Phase: rounds of the greedy-consistency phase after training. Mean length greedy / sampled. Each card "
         "keeps the command that made the prior.\n\n"
         "| goal | env | method | labelled steps | memory | phase | success greedy | success sampled | mean length "

@@ -85,6 +85,8 @@ def list_priors(
 
 
 def _zoo_table(entries: list, goal: Optional[str], sims: dict[str, float], chosen: set[str]) -> Table:
+    from sb3_disagree.priors.zoo import memory_label
+
     envs = sorted({e.env_id for e in entries})
     table = Table(title=(f"priors for {goal!r}" if goal else "prior zoo") + (f" in {envs[0]}" if len(envs) == 1 else ""))
     table.add_column("goal", no_wrap=True)
@@ -99,20 +101,13 @@ def _zoo_table(entries: list, goal: Optional[str], sims: dict[str, float], chose
                    ((card.evaluation_greedy, card.evaluation) if card else ({}, {}))]
         row = [e.goal, *([e.env_id] if len(envs) > 1 else []), card.sb3_class.rsplit(".", 1)[-1] if card else "?",
                str(card.training.get("method", "?")) if card else "?", str(card.training.get("steps", "?")) if card else "?",
-               _memory(card.training) if card else "?",
+               memory_label(card.training) if card else "?",
                *(f"{v:.2f}" if v is not None else "-" for v in success)]
         if goal:
             row += [f"{sims[e.goal]:.3f}" if e.goal in sims else "(goal)", "[bold green]chosen[/]" if e.goal in chosen else ""]
         row.append("[green]ok[/]" if not e.problem else f"[red]{e.problem}[/]")
         table.add_row(*row)
     return table
-
-
-def _memory(training: dict) -> str:
-    """The prior's memory, in observations ("3+flags" for loop flags over a stack of three, the CNN on the newest
-    frame; "3 all+flags" with the CNN on all three)."""
-    flags = " all+flags" if training.get("flags_cnn") == "stack" else "+flags"
-    return str(training.get("frame_stack", 1)) + (flags if training.get("loop_flags") else "")
 
 
 @app.command()

@@ -73,6 +73,17 @@ def _memory_of(policy: Any) -> dict[str, Any]:
             "flags_cnn": policy.features_extractor_kwargs.get("cnn_sees", "newest")}
 
 
+def memory_label(training: dict[str, Any]) -> str:
+    """
+    A prior's memory as ``dopt priors list`` and docs/zoo.md show it: the frames it sees, ``+flags`` for loop flags
+    on a CNN over the newest frame, `` all+flags`` for loop flags on a CNN over every frame ("3", "3+flags", "4 all+flags").
+
+    :param training: A card's training record
+    """
+    flags = " all+flags" if training.get("flags_cnn") == "stack" else "+flags"
+    return str(training.get("frame_stack", 1)) + (flags if training.get("loop_flags") else "")
+
+
 class ZooError(ValueError):
     """A zoo entry that cannot be used, with the reason."""
 
