@@ -76,7 +76,8 @@ def _memory_of(policy: Any) -> dict[str, Any]:
 def memory_label(training: dict[str, Any]) -> str:
     """
     A prior's memory as ``dopt priors list`` and docs/zoo.md show it: the frames it sees, ``+flags`` for loop flags
-    on a CNN over the newest frame, `` all+flags`` for loop flags on a CNN over every frame ("3", "3+flags", "4 all+flags").
+    on a CNN over the newest frame, `` all+flags`` for loop flags on a CNN over every frame ("3", "3+flags",
+    "4 all+flags").
 
     :param training: A card's training record
     """
