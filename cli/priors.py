@@ -183,7 +183,8 @@ def _make_options() -> list:
 
     return [*options_of(make_prior, only=("goal", "method", "env_id", "steps", "n_envs", "seed", "episodes", "replace",
                                                  "consistency_rounds", "consistency_steps",
-                                                 "consistency_loop_uniform", "consistency_validation_episodes"),
+                                                 "consistency_loop_uniform", "consistency_validation_episodes",
+                                                 "consistency_expert_in_loops"),
                         flags={"env_id": "--env"}, defaults={"env_id": DEFAULT_ENV}),
             *options_of(train_dagger, only=("rounds", "steps_per_round", "epochs", "final_epochs",
                                             "validation_episodes", "learner_actions", "frame_stack", "loop_flags",
@@ -221,7 +222,8 @@ def _refine_options() -> list:
     from sb3_disagree.priors.make import refine_entry
 
     return [*options_of(refine_entry, only=("goal", "env_id", "rounds", "steps", "loop_uniform", "n_envs", "seed",
-                                            "episodes", "only_if_better", "validation_episodes"),
+                                            "episodes", "only_if_better", "validation_episodes",
+                                            "expert_in_loops"),
                         flags={"env_id": "--env"}, defaults={"env_id": DEFAULT_ENV}),
             *options_of(list_priors, only=("zoo",))]
 

@@ -16,7 +16,8 @@ from sb3_disagree import ACER
 from stable_baselines3.common.callbacks import BaseCallback
 
 from sb3_disagree.acer.consistency import (HarvestLabels, RoundStats, _Labels, _Rounds, collect_escapes,
-                                          fit_best_epoch, fit_labels, greedy_consistency, loop_free_labels)
+                                          expert_loop_labels, fit_best_epoch, fit_labels, greedy_consistency,
+                                          loop_free_labels)
 from sb3_disagree.acer.memory import push_frames
 from sb3_disagree.cli.app import app
 
@@ -32,6 +33,18 @@ runner = CliRunner()
 ])
 def test_loop_free_labels_by_hand(keys, actions, expected):
     assert loop_free_labels(list(keys), actions) == expected
+
+
+@pytest.mark.parametrize("keys, actions, experts, success, expected", [
+    ("ABAC", [1, 0, 2, 2], [2, 1, 0, 2], True, [(0, 2), (2, 0), (3, 2)]),  # A's two visits: the expert; C: the path
+    ("ABAC", [1, 0, 2, 2], [2, 1, 0, 2], False, [(0, 2), (2, 0)]),  # a failure: only the loop's poses
+    ("AAB", [2, 0, 2], [1, 1, 2], True, [(0, 1), (1, 1), (2, 2)]),  # a blocked forward: the expert at both visits
+    ("ABCBAD", [1, 1, 0, 0, 2, 2], [0, 1, 2, 1, 0, 2], False, [(0, 0), (1, 1), (3, 1), (4, 0)]),  # C once: dropped
+    ("ABCD", [2, 2, 0, 2], [1, 1, 1, 1], True, [(0, 2), (1, 2), (2, 0), (3, 2)]),  # no loop: the path as taken
+    ("ABCD", [2, 2, 0, 2], [1, 1, 1, 1], False, []),
+])
+def test_expert_loop_labels_by_hand(keys, actions, experts, success, expected):
+    assert expert_loop_labels(list(keys), actions, experts, success) == expected
 
 
 def _episode_stacks(rng: np.random.Generator, steps: int, k: int) -> list[np.ndarray]:
@@ -118,6 +131,25 @@ def test_a_sharp_looping_policy_escapes_only_with_a_uniform_share_in_loops():
     assert counts["episodes"] > 0 and counts["successes"] == 0
     labels, counts = collect_escapes(model, env, 800, np.random.default_rng(0), loop_uniform=0.5)
     assert counts["successes"] > 0 and (np.asarray(labels.actions) == 2).any()
+
+
+def test_the_expert_labels_the_loops_that_a_sharp_policy_cannot_escape():
+    """pi = 1 on turning left, no uniform share: no episode escapes, so the plain phase has no label at all; with
+    the expert in loops every spin is labelled by the expert, and the phase makes the spinner reach the goal."""
+    model = _spinning_model()
+    with th.no_grad():
+        model.policy.net.action_net.bias.copy_(th.tensor([30.0, 0.0, 0.0]))
+    env = make_vec_env(TurnEnv, n_envs=4, seed=1)
+    labels, counts = collect_escapes(model, env, 800, np.random.default_rng(0), expert_in_loops=True)
+    assert counts["successes"] == 0 and counts["expert_labels"] == len(labels.actions) > 0
+    heading = np.stack(labels.inputs).argmax(1) % 4
+    assert np.array_equal(labels.actions, [{0: 2, 1: 1, 2: 0, 3: 0}[h] for h in heading])
+    assert _greedy_success(model) == 0.0
+    history = greedy_consistency(model, env, rounds=2, steps=800, epochs=20, learning_rate=3e-3, seed=0,
+                                 expert_in_loops=True)
+    assert history[0].expert_labels > 0 and history[0].as_dict()["expert_labels"] == history[0].expert_labels
+    assert _greedy_success(model) >= 0.95
+    assert "expert_labels" not in RoundStats(1, 1, 1, 1, 0.0, 1.0).as_dict()  # none: the card as before
 
 
 @pytest.mark.parametrize("frame_stack", [1, 2])

@@ -410,10 +410,12 @@ def test_cli_refine_replaces_the_prior_and_keeps_its_history(tmp_path):
     assert card.command == f"{before.command}; then {before.command}"  # both the test runner's argv here
     assert card.evaluation["episodes"] == card.evaluation_greedy["episodes"] == 2
     assert card.training["consistency"]["before"] == {}  # the DAgger prior had no evaluation on its card
-    again = runner.invoke(app, [*base, "--goal", "toilet", "--rounds", "1", "--episodes", "0"])
-    assert again.exit_code == 0, again.output
+    again = runner.invoke(app, [*base, "--goal", "toilet", "--rounds", "1", "--episodes", "0", "--expert-in-loops"])
+    assert again.exit_code == 0 and "from the expert" in again.output, again.output
     card = Zoo(tmp_path).get("toilet", STATE_ID).card
     assert [p["rounds"] for p in card.training["consistency_more"]] == [1] and not card.evaluation
+    assert card.training["consistency_more"][0]["expert_in_loops"] and "expert_in_loops" not in card.training[
+        "consistency"]
     assert card.training["consistency_more"][0]["before"]["greedy"]["episodes"] == 2  # what the second phase replaced
 
 

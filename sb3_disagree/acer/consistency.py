@@ -7,10 +7,11 @@ against a wall whose picture looks like open floor. The phase acts greedily, sam
 frame was already seen in the episode (the greedy policy is in a loop), cuts every loop out of the episodes
 that reach the goal, and fits the acting network by cross-entropy to the actions of the loop-free paths,
 aggregated over rounds (as DAgger aggregates its labels). No prior, expert or map is used: only the policy, the
-env's success flag and frame identity.
+env's success flag and frame identity; a prior's phase may add the env's expert in loops (``expert_in_loops``).
 """
 
 import copy
+from collections import Counter
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any, Optional, Union
@@ -51,6 +52,26 @@ def loop_free_labels(keys: list[Any], actions: list[int]) -> list[tuple[int, int
     return [(t, action) for _, steps, action in path for t in steps]
 
 
+def expert_loop_labels(keys: list[Any], actions: list[int], experts: list[int], success: bool) -> list[tuple[int, int]]:
+    """
+    An episode's labels where an expert is at hand: the expert's action at every step whose pose the episode visits
+    more than once (each visit of a loop's poses, the first included, in episodes that failed too), and, in an
+    episode that reached the goal, the loop-free path's label (:func:`loop_free_labels`) at every other step.
+
+    :param keys: Per step, a hashable key of the pose (the newest frame's bytes)
+    :param actions: Per step, the action taken
+    :param experts: Per step, the expert's action
+    :param success: Whether the episode reached the goal
+    :return: (step index, label) pairs, by step
+    """
+    visits = Counter(keys)
+    labels = {t: int(experts[t]) for t, key in enumerate(keys) if visits[key] > 1}
+    if success:
+        for t, action in loop_free_labels(keys, actions):
+            labels.setdefault(t, action)
+    return sorted(labels.items())
+
+
 @dataclass
 class RoundStats:
     """What one round collected and fitted."""
@@ -61,12 +82,13 @@ class RoundStats:
     labels: int
     loss: float
     accuracy: float
+    expert_labels: int = 0  # labels of loops' poses from the env's expert (expert_in_loops)
     epoch: int = 0  # with a validation, the epoch whose weights were kept (its loss and accuracy above); 0: the last
     validation: list[float] = field(default_factory=list)  # greedy validation success after each epoch
 
     def as_dict(self) -> dict[str, Any]:
         return {k: [float(x) for x in v] if isinstance(v, list) else float(v) for k, v in self.__dict__.items()
-                if k not in ("epoch", "validation") or self.validation}
+                if (k not in ("epoch", "validation") or self.validation) and (k != "expert_labels" or self.expert_labels)}
 
 
 class _Labels:
@@ -121,23 +143,30 @@ class _Labels:
 
 
 class _Trails:
-    """Each env's episode under way (inputs, pose keys, actions); at its end, its loop-free path is kept as labels
-    if it reached the goal."""
+    """Each env's episode under way (inputs, pose keys, actions, the expert's actions); at its end, its loop-free
+    path is kept as labels if it reached the goal, and with ``expert`` its loops' poses with the expert's actions
+    (:func:`expert_loop_labels`)."""
 
-    def __init__(self, n_envs: int, k: int = 1) -> None:
-        self.trails: list[list[tuple[np.ndarray, bytes, int]]] = [[] for _ in range(n_envs)]
-        self.labels, self.episodes, self.successes = _Labels(k), 0, 0
+    def __init__(self, n_envs: int, k: int = 1, expert: bool = False) -> None:
+        self.trails: list[list[tuple[np.ndarray, bytes, int, int]]] = [[] for _ in range(n_envs)]
+        self.labels, self.episodes, self.successes, self.expert, self.expert_labels = _Labels(k), 0, 0, expert, 0
 
-    def add(self, i: int, net_input: np.ndarray, key: bytes, action: int) -> None:
-        self.trails[i].append((net_input.copy(), key, int(action)))
+    def add(self, i: int, net_input: np.ndarray, key: bytes, action: int, expert: int = -1) -> None:
+        self.trails[i].append((net_input.copy(), key, int(action), int(expert)))
 
     def end(self, i: int, success: bool) -> None:
         trail, self.trails[i] = self.trails[i], []
         self.episodes += 1
-        if success:
-            self.successes += 1
-            labels = loop_free_labels([key for _, key, _ in trail], [a for _, _, a in trail])
-            self.labels.add_episode([x for x, _, _ in trail], labels)
+        self.successes += int(success)
+        keys, actions = [step[1] for step in trail], [step[2] for step in trail]
+        if self.expert:
+            experts = [step[3] for step in trail]
+            labels = expert_loop_labels(keys, actions, experts, success)
+            self.expert_labels += sum(Counter(keys)[keys[t]] > 1 for t, _ in labels)
+        else:
+            labels = loop_free_labels(keys, actions) if success else []
+        if labels:
+            self.labels.add_episode([step[0] for step in trail], labels)
 
 
 class _Rounds:
@@ -175,7 +204,8 @@ SAMPLING = ("loops", "always")  # where the collection samples instead of acting
 
 
 def collect_escapes(model: Any, env: VecEnv, steps: int, rng: np.random.Generator,
-                    sampling: str = "loops", loop_uniform: float = 0.0) -> tuple[_Labels, dict[str, int]]:
+                    sampling: str = "loops", loop_uniform: float = 0.0,
+                    expert_in_loops: bool = False) -> tuple[_Labels, dict[str, int]]:
     """
     Act greedily with the model's acting network, sampling from it only where the newest frame was already seen
     in the episode, for ``steps`` env steps; return the loop-free labels of the episodes that reached the goal
@@ -188,19 +218,25 @@ def collect_escapes(model: Any, env: VecEnv, steps: int, rng: np.random.Generato
     :param sampling: "loops" (greedy, sampling in loops) or "always" (every action sampled, as training acts)
     :param loop_uniform: In a loop, the share of the uniform distribution in what is sampled,
         ``(1 - u) pi + u / n``: a sharp policy that loops (pi near 1 on turning back) escapes only by this
-    :return: The labels and counts (env_steps, episodes, successes)
+    :param expert_in_loops: Label every visit of a pose the episode visits more than once with the env's expert
+        (its envs' ``expert_action()``), in failed episodes too (:func:`expert_loop_labels`): where the policy
+        loops, a path that escaped by chance is not the only teacher
+    :return: The labels and counts (env_steps, episodes, successes, expert_labels)
     """
     if sampling not in SAMPLING:
         raise ValueError(f"sampling must be one of {SAMPLING}, got {sampling!r}")
     policy, n, k = model.policy, env.num_envs, model.policy.frame_stack
     obs = np.asarray(maybe_transpose(env.reset(), policy.observation_space))  # images: channels first, as stored
     stack = push_frames(None, obs, None, k)
-    trails = _Trails(n, k)
+    trails = _Trails(n, k, expert_in_loops)
     seen: list[set[bytes]] = [set() for _ in range(n)]
+    experts = np.full(n, -1)
     for _ in range(max(steps // n, 1)):
         with th.no_grad():  # the acting network's distribution, as predict draws from it
             probs = policy.get_distribution(th.as_tensor(stack, device=policy.device)).distribution.probs.cpu().numpy()
         actions = probs.argmax(-1)
+        if expert_in_loops:
+            experts = np.asarray(env.env_method("expert_action"), dtype=np.int64)
         for i in range(n):
             key = obs[i].tobytes()
             looping = key in seen[i]  # a pose seen before: the greedy policy loops, so sample
@@ -210,7 +246,7 @@ def collect_escapes(model: Any, env: VecEnv, steps: int, rng: np.random.Generato
                     p = (1 - loop_uniform) * p + loop_uniform / len(p)
                 actions[i] = rng.choice(len(p), p=p)
             seen[i].add(key)
-            trails.add(i, stack[i], key, int(actions[i]))
+            trails.add(i, stack[i], key, int(actions[i]), int(experts[i]))
         new_obs, _, dones, infos = env.step(actions)
         for i in np.flatnonzero(dones):
             trails.end(i, bool(infos[i].get("is_success")))
@@ -218,7 +254,7 @@ def collect_escapes(model: Any, env: VecEnv, steps: int, rng: np.random.Generato
         obs = np.asarray(maybe_transpose(new_obs, policy.observation_space))
         stack = push_frames(stack, obs, dones, k)
     return trails.labels, {"env_steps": max(steps // n, 1) * n, "episodes": trails.episodes,
-                           "successes": trails.successes}
+                           "successes": trails.successes, "expert_labels": trails.expert_labels}
 
 
 def fit_labels(policy: Any, inputs: Union[np.ndarray, _Rounds], actions: np.ndarray, epochs: int,
@@ -286,7 +322,8 @@ def greedy_consistency(model: Any, env: Optional[VecEnv], rounds: int = 3, steps
                        learning_rate: float = 3e-4, batch_size: int = 128, seed: int = 0,
                        on_round: Optional[Any] = None, sampling: str = "loops", loop_uniform: float = 0.0,
                        harvest: Optional["HarvestLabels"] = None,
-                       validate: Optional[Callable[[], tuple[float, float]]] = None) -> list[RoundStats]:
+                       validate: Optional[Callable[[], tuple[float, float]]] = None,
+                       expert_in_loops: bool = False) -> list[RoundStats]:
     """
     The greedy-consistency phase: ``rounds`` times, collect ``steps`` env steps acting greedily (sampling only
     in loops), add the loop-free labels of the successful episodes to those of earlier rounds, and fit the acting
@@ -309,6 +346,8 @@ def greedy_consistency(model: Any, env: Optional[VecEnv], rounds: int = 3, steps
     :param harvest: The labels a :class:`HarvestLabels` kept during training
     :param validate: The acting network's greedy success and mean episode length on validation episodes; with it,
         each fit keeps the weights of its epoch that validates best (:func:`fit_best_epoch`)
+    :param expert_in_loops: Label the poses of loops with the env's expert (see :func:`collect_escapes`): for a
+        prior, whose env has one
     :return: Each round's statistics (with ``rounds`` 0, the harvest's fit: its episodes, 0 env steps)
     """
     if rounds < (0 if harvest is not None else 1) or epochs < 1 or (rounds and steps < env.num_envs):
@@ -319,8 +358,8 @@ def greedy_consistency(model: Any, env: Optional[VecEnv], rounds: int = 3, steps
     inputs, actions = _Rounds(), list(trails.labels.actions)
     inputs.add(trails.labels)
 
-    def fit(env_steps: int, episodes: int, successes: int, labels: int) -> RoundStats:
-        stats = RoundStats(env_steps, episodes, successes, labels, float("nan"), float("nan"))
+    def fit(env_steps: int, episodes: int, successes: int, labels: int, expert_labels: int = 0) -> RoundStats:
+        stats = RoundStats(env_steps, episodes, successes, labels, float("nan"), float("nan"), expert_labels)
         if len(inputs):
             fit_args = (model.policy, inputs, np.asarray(actions, dtype=np.int64), epochs, learning_rate, batch_size,
                         rng)
@@ -336,10 +375,11 @@ def greedy_consistency(model: Any, env: Optional[VecEnv], rounds: int = 3, steps
         return [fit(0, trails.episodes, trails.successes, len(actions))]
     history = []
     for _ in range(rounds):
-        labels, counts = collect_escapes(model, env, steps, rng, sampling, loop_uniform)
+        labels, counts = collect_escapes(model, env, steps, rng, sampling, loop_uniform, expert_in_loops)
         inputs.add(labels)
         actions += labels.actions
-        history.append(fit(counts["env_steps"], counts["episodes"], counts["successes"], len(labels.actions)))
+        history.append(fit(counts["env_steps"], counts["episodes"], counts["successes"], len(labels.actions),
+                           counts["expert_labels"]))
     return history
 
 

@@ -255,7 +255,7 @@ def _evaluate_model(load: Callable[[VecEnv], BaseAlgorithm], entry: Any, episode
 def make_prior(zoo: Any, goal: str, env_id: str, method: str = "dagger", steps: int = 200_000, n_envs: int = 4,
                seed: int = 0, episodes: int = 100, replace: bool = False, consistency_rounds: int = 0,
                consistency_steps: int = 20_000, consistency_loop_uniform: float = 0.5,
-               consistency_validation_episodes: int = 0, command: str = "",
+               consistency_validation_episodes: int = 0, consistency_expert_in_loops: bool = False, command: str = "",
                progress: Optional[Callable[[str], None]] = None, **dagger_kwargs: Any) -> tuple[Any, dict[str, Any]]:
     """
     Train a prior, add it to the zoo, and record its evaluation alone (greedy and sampled) on its card: what
@@ -278,6 +278,9 @@ def make_prior(zoo: Any, goal: str, env_id: str, method: str = "dagger", steps: 
         expert is sharp, and sampling from pi alone where it turns back and forth repeats the turn
     :param consistency_validation_episodes: Greedy validation episodes after each epoch of that phase, from
         DAgger's validation starts: each round keeps its best epoch and the phase its best round (0: none)
+    :param consistency_expert_in_loops: In that phase, label every visit of a pose an episode visits more than
+        once with the env's expert, in failed episodes too (a memoryless or short-memory greedy prior's failures
+        are cycles over a few poses, docs/method.md)
     :param command: The command that made it, for the card
     :param progress: Called with a line of text as training goes (DAgger's rounds, the phase's rounds)
     :param dagger_kwargs: :func:`train_dagger`'s own settings (rounds, epochs, validation_episodes, ...)
@@ -311,14 +314,14 @@ def make_prior(zoo: Any, goal: str, env_id: str, method: str = "dagger", steps: 
     if consistency_rounds:
         record["consistency"] = refine_prior(model, env_id, goal, consistency_rounds, consistency_steps,
                                              consistency_loop_uniform, n_envs, seed, progress,
-                                             consistency_validation_episodes)
+                                             consistency_validation_episodes, consistency_expert_in_loops)
     entry = _add_model(zoo, model, goal, env_id, record, command, replace)
     return record_evaluations(zoo, entry, episodes) if episodes else (entry, {})
 
 
 def refine_prior(model: ACER, env_id: str, goal: str, rounds: int, steps: int, loop_uniform: float = 0.5,
                  n_envs: int = 4, seed: int = 0, progress: Optional[Callable[[str], None]] = None,
-                 validation_episodes: int = 0) -> dict[str, Any]:
+                 validation_episodes: int = 0, expert_in_loops: bool = False) -> dict[str, Any]:
     """
     The greedy-consistency phase (:func:`~sb3_disagree.acer.consistency.greedy_consistency`, three epochs a round)
     on a trained prior, in place, on env seeds ``seed + CONSISTENCY_SEED_OFFSET``, apart from its training, its
@@ -328,6 +331,8 @@ def refine_prior(model: ACER, env_id: str, goal: str, rounds: int, steps: int, l
         from DAgger's validation starts (env seed ``PRIOR_VALIDATION_SEED``, the env's own step limit) and keeps its
         best epoch, and the phase ends on the best round's weights (ties: the later round), as DAgger keeps its
         best round; 0: the last epoch of the last round
+    :param expert_in_loops: Label every visit of a pose an episode visits more than once with the env's expert
+        (``expert_action()``), in failed episodes too; the loop-free paths of successes label the other steps
     :return: The phase's record for the card: its settings, seconds and per-round statistics
     """
     from sb3_disagree.acer.consistency import greedy_consistency
@@ -339,7 +344,8 @@ def refine_prior(model: ACER, env_id: str, goal: str, rounds: int, steps: int, l
         nonlocal best, done
         done += 1
         line = (f"consistency round: {stats.successes}/{stats.episodes} episodes reached the goal, "
-                f"{stats.labels} labels, accuracy {stats.accuracy:.3f}")
+                f"{stats.labels} labels{f' ({stats.expert_labels} from the expert)' if expert_in_loops else ''}, "
+                f"accuracy {stats.accuracy:.3f}")
         if stats.validation:
             kept = stats.validation[stats.epoch - 1]
             line += f", validation success {kept:.2f} (epoch {stats.epoch})"
@@ -361,12 +367,13 @@ def refine_prior(model: ACER, env_id: str, goal: str, rounds: int, steps: int, l
     start = time.perf_counter()
     try:
         history = greedy_consistency(model, env, rounds, steps, seed=seed, on_round=on_round, loop_uniform=loop_uniform,
-                                     validate=validate)
+                                     validate=validate, expert_in_loops=expert_in_loops)
     finally:
         env.close()
         if validate is not None:
             validation_env.close()
-    record = {"rounds": rounds, "steps_per_round": steps, "loop_uniform": loop_uniform}
+    record = {"rounds": rounds, "steps_per_round": steps, "loop_uniform": loop_uniform,
+              **({"expert_in_loops": True} if expert_in_loops else {})}
     if best is not None:
         net.load_state_dict(best[2])
         record.update(validation_episodes=validation_episodes, validation_seed=PRIOR_VALIDATION_SEED,
@@ -380,7 +387,7 @@ def refine_prior(model: ACER, env_id: str, goal: str, rounds: int, steps: int, l
 def refine_entry(zoo: Any, goal: str, env_id: str, rounds: int, steps: int = 20_000, loop_uniform: float = 0.5,
                  n_envs: int = 4, seed: int = 0, episodes: int = 100, only_if_better: bool = False, command: str = "",
                  progress: Optional[Callable[[str], None]] = None,
-                 validation_episodes: int = 0) -> tuple[Any, dict[str, Evaluation], bool]:
+                 validation_episodes: int = 0, expert_in_loops: bool = False) -> tuple[Any, dict[str, Evaluation], bool]:
     """
     The greedy-consistency phase (:func:`refine_prior`) on a prior already in the zoo, which it replaces: the card keeps
     how the prior was trained, adds the phase (with the evaluations it replaces, under ``before``), and records the
@@ -405,6 +412,8 @@ def refine_entry(zoo: Any, goal: str, env_id: str, rounds: int, steps: int = 20_
     :param progress: Called with a line of text after each round
     :param validation_episodes: Greedy validation episodes after each epoch, from DAgger's validation starts: each
         round keeps its best epoch and the phase its best round (0: none; :func:`refine_prior`)
+    :param expert_in_loops: Label every visit of a pose an episode visits more than once with the env's expert, in
+        failed episodes too (:func:`refine_prior`)
     :return: The zoo entry (as read back), the refined prior's evaluations by label ("greedy", "sampled"), and
         whether it replaced the prior
     """
@@ -426,7 +435,8 @@ def refine_entry(zoo: Any, goal: str, env_id: str, rounds: int, steps: int = 20_
                          f"({episodes}) from seed {PRIOR_CARD_SEED}, and {goal!r}'s card has no such pair: run "
                          f"dopt priors eval {goal} --episodes {episodes} --record first, or change --episodes")
     record = dict(entry.card.training or {})
-    phase = refine_prior(model, env_id, goal, rounds, steps, loop_uniform, n_envs, seed, progress, validation_episodes)
+    phase = refine_prior(model, env_id, goal, rounds, steps, loop_uniform, n_envs, seed, progress, validation_episodes,
+                         expert_in_loops)
     evaluations = {label: _evaluate_model(lambda _: model, entry, episodes, label == "greedy", PRIOR_CARD_SEED)
                    for label in ("greedy", "sampled")} if episodes else {}
     if only_if_better and (min(ev.success_rate for ev in evaluations.values())
