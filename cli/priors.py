@@ -188,7 +188,7 @@ def _make_options() -> list:
                         flags={"env_id": "--env"}, defaults={"env_id": DEFAULT_ENV}),
             *options_of(train_dagger, only=("rounds", "steps_per_round", "epochs", "final_epochs",
                                             "validation_episodes", "learner_actions", "frame_stack", "loop_flags",
-                                            "flags_cnn"),
+                                            "flags_cnn", "expert_no_return"),
                         flags={"loop_flags": "--loop-flags/--no-loop-flags"},
                         helps={k: "DAgger: " + v for k, v in param_help(train_dagger).items()}),
             *options_of(list_priors, only=("zoo",))]
@@ -204,7 +204,7 @@ def train(**options) -> None:
         goal, method, zoo = options.pop("goal"), options.pop("method"), options.pop("zoo")
         dagger = {k: options.pop(k) for k in ("rounds", "steps_per_round", "epochs", "final_epochs",
                                               "validation_episodes", "learner_actions", "frame_stack",
-                                              "loop_flags", "flags_cnn")}
+                                              "loop_flags", "flags_cnn", "expert_no_return")}
         with _progress() as progress:
             # a line per round, and one each for the kept round and the final epochs where there are any
             lines = dagger["rounds"] + (dagger["validation_episodes"] > 0) + (dagger["final_epochs"] > 0)

@@ -9,6 +9,7 @@ policy needs.
 
 import math
 from functools import lru_cache
+from collections.abc import Sequence
 from typing import Optional
 
 import numpy as np
@@ -134,9 +135,17 @@ class GridExpert:
                   for a in (MOVE_FORWARD, TURN_LEFT, TURN_RIGHT)]
         return [a for _, a in sorted(scores)]
 
-    def planned_action(self, x: float, z: float, heading: float) -> int:
-        """The expert's action at a pose, without noise and without memory of the episode."""
-        return self.ranked_actions(x, z, heading)[0]
+    def planned_action(self, x: float, z: float, heading: float,
+                       avoid: Sequence[tuple[float, float, float]] = ()) -> int:
+        """
+        The expert's action at a pose, without noise and without memory of the episode.
+
+        :param avoid: Poses not to go to: the best-ranked action leading elsewhere is taken (the best overall where
+            every action leads to one of them)
+        """
+        ranked = self.ranked_actions(x, z, heading)
+        keys = {_pose_key(*pose) for pose in avoid}
+        return next((a for a in ranked if _pose_key(*self._next(x, z, heading, a)) not in keys), ranked[0])
 
     def __call__(self) -> int:
         """

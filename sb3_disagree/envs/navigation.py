@@ -42,6 +42,7 @@ class NavigationEnv(gym.Env):
         self.x = self.z = self.heading = 0.0
         self.step_count = 0
         self.path: list[tuple[float, float]] = []
+        self.previous_pose: Optional[tuple[float, float, float]] = None  # before the last step; None at a reset
 
     @property
     def distance(self) -> float:
@@ -80,6 +81,7 @@ class NavigationEnv(gym.Env):
         self.set_pose(*self._sample_pose())
         self.step_count = 0
         self.path = [(self.x, self.z)]
+        self.previous_pose = None
         return self._obs(), self._info()
 
     def step(self, action: int) -> tuple[np.ndarray, float, bool, bool, dict]:
@@ -87,6 +89,7 @@ class NavigationEnv(gym.Env):
         if not self.action_space.contains(action):
             raise ValueError(f"invalid action {action}; actions are 0 turn left, 1 turn right, 2 move forward")
         before, collided = self.distance, False
+        self.previous_pose = (self.x, self.z, self.heading)
         if action == TURN_LEFT:
             self.heading = wrap(self.heading + self.turn_step)
         elif action == TURN_RIGHT:
@@ -106,10 +109,17 @@ class NavigationEnv(gym.Env):
         truncated = not success and self.step_count >= self.max_episode_steps
         return self._obs(), reward, success, truncated, self._info(success)
 
-    def expert_action(self) -> int:
-        """The grid expert's action for the current state (what DAgger labels with)."""
+    def expert_action(self, no_return: bool = False) -> int:
+        """
+        The grid expert's action for the current state (what DAgger labels with).
+
+        :param no_return: Never an action that leaves the pose as it is (a blocked move) or returns to the pose
+            before the last step (turning back): the receding horizon's local minima then cannot hold it in a
+            loop. A function of the last two poses, which a policy seeing two frames or more can tell apart
+        """
         if self._expert is None:
             from sb3_disagree.envs.expert import GridExpert
 
             self._expert = GridExpert(self)
-        return self._expert.planned_action(self.x, self.z, self.heading)
+        avoid = [(self.x, self.z, self.heading), self.previous_pose] if no_return else []
+        return self._expert.planned_action(self.x, self.z, self.heading, [p for p in avoid if p is not None])
