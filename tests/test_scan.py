@@ -163,3 +163,26 @@ def test_the_method_runs_on_the_office_end_to_end(tmp_path):
     assert r.exit_code == 0, r.output
     assert "priors: sofa" in r.output or "priors: fridge" in r.output
     assert (tmp_path / "runs" / "sb3_disagree__OfficeState-v0" / "table" / "room-sensor-0" / "model.zip").exists()
+
+
+def test_the_expert_that_does_not_return_leaves_the_loops_the_memoryless_one_keeps():
+    """From office starts where the memoryless expert (DAgger's default labels) stays in a loop until the cut, pressing
+    against an obstacle (seed 10027) or turning left and right (10110), ``expert_action(no_return=True)`` reaches the
+    sofa, never staying in place or going back to the pose before; ``previous_pose`` is the pose before the last step."""
+    from sb3_disagree.envs.expert import _pose_key
+
+    env = ScanEnv(goal="sofa", obs="state")
+    for seed in (10027, 10110):
+        for no_return in (False, True):
+            env.reset(seed=seed)
+            assert env.previous_pose is None
+            poses, done = [_pose_key(env.x, env.z, env.heading)], False
+            while not done:
+                before = (env.x, env.z, env.heading)
+                _, _, terminated, truncated, info = env.step(env.expert_action(no_return=no_return))
+                assert env.previous_pose == before
+                poses.append(_pose_key(env.x, env.z, env.heading))
+                done = terminated or truncated
+            assert info["is_success"] == no_return, (seed, no_return)
+            returns = sum(p in (q, r) for p, q, r in zip(poses[2:], poses[1:], poses))
+            assert (returns == 0) if no_return else returns > 400, (seed, returns)

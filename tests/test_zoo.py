@@ -188,6 +188,27 @@ def test_cli_train_dagger_tiny(tmp_path):
     assert f"kept round {card.training['selected_round']}" in result.output
 
 
+@pytest.mark.parametrize("no_return", [False, True])
+def test_dagger_labels_with_the_expert_asked_for(monkeypatch, no_return):
+    """--expert-no-return makes every DAgger label the expert's that does not return (the env's
+    ``expert_action(no_return=True)``), and the card says so; by default the memoryless expert labels, as before."""
+    from sb3_disagree.envs.navigation import NavigationEnv
+    from sb3_disagree.envs.vec import make_vec
+    from sb3_disagree.priors.make import train_dagger
+
+    asked, expert_action = [], NavigationEnv.expert_action
+
+    def spy(self, **kwargs):
+        asked.append(kwargs.get("no_return", False))
+        return expert_action(self, **kwargs)
+
+    monkeypatch.setattr(NavigationEnv, "expert_action", spy)
+    _, record = train_dagger(make_vec(STATE_ID, "toilet", n_envs=2), rounds=2, steps_per_round=40, epochs=1,
+                             expert_no_return=no_return)
+    assert len(asked) == 80 and set(asked) == {no_return}
+    assert record.get("expert_no_return", False) == no_return
+
+
 def test_similarity_command_and_heatmap(tmp_path):
     out = tmp_path / "sim.png"
     result = runner.invoke(app, ["similarity", "shower", "bathtub", "toilet", "--plot", str(out)])
