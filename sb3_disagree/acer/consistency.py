@@ -88,7 +88,8 @@ class RoundStats:
 
     def as_dict(self) -> dict[str, Any]:
         return {k: [float(x) for x in v] if isinstance(v, list) else float(v) for k, v in self.__dict__.items()
-                if (k not in ("epoch", "validation") or self.validation) and (k != "expert_labels" or self.expert_labels)}
+                if (k not in ("epoch", "validation") or self.validation)
+                and (k != "expert_labels" or self.expert_labels)}
 
 
 class _Labels:
@@ -160,9 +161,9 @@ class _Trails:
         self.successes += int(success)
         keys, actions = [step[1] for step in trail], [step[2] for step in trail]
         if self.expert:
-            experts = [step[3] for step in trail]
-            labels = expert_loop_labels(keys, actions, experts, success)
-            self.expert_labels += sum(Counter(keys)[keys[t]] > 1 for t, _ in labels)
+            labels = expert_loop_labels(keys, actions, [step[3] for step in trail], success)
+            visits = Counter(keys)
+            self.expert_labels += sum(visits[keys[t]] > 1 for t, _ in labels)
         else:
             labels = loop_free_labels(keys, actions) if success else []
         if labels:
