@@ -505,13 +505,17 @@ def test_a_shipped_zoo_by_name_unless_a_folder_has_that_name(tmp_path, monkeypat
 def test_the_shipped_greedy_zoo_meets_its_bar():
     """Every prior of the shipped greedy zoo is usable and its card records it alone over at least 300 episodes each
     way with success >= 0.95 greedy and sampled, made by DAgger and the greedy-consistency phase, with loop flags where
-    it sees frames; it has the ten goals of the apartment, by frames and by pose."""
+    it sees frames; it has the ten goals of the apartment, by frames and by pose, and the office's three, as the default
+    zoo has them."""
+    from sb3_disagree.envs import OFFICE_ID
     from sb3_disagree.envs.layout import default_layout
 
-    zoo = Zoo("greedy")
-    for env_id in ("sb3_disagree/Apartment-v0", STATE_ID):
+    zoo, office = Zoo("greedy"), sorted(e.goal for e in Zoo().entries(OFFICE_ID))
+    assert office == ["desk", "fridge", "sofa"]
+    for env_id, goals in (("sb3_disagree/Apartment-v0", sorted(default_layout().object_names)),
+                          (STATE_ID, sorted(default_layout().object_names)), (OFFICE_ID, office)):
         entries = zoo.entries(env_id)
-        assert sorted(e.goal for e in entries) == sorted(default_layout().object_names), env_id
+        assert sorted(e.goal for e in entries) == goals, env_id
         for e in entries:
             assert e.problem is None, (e.goal, e.problem)
             for ev in (e.card.evaluation, e.card.evaluation_greedy):
