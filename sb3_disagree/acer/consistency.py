@@ -162,8 +162,7 @@ class _Trails:
         keys, actions = [step[1] for step in trail], [step[2] for step in trail]
         if self.expert:
             labels = expert_loop_labels(keys, actions, [step[3] for step in trail], success)
-            visits = Counter(keys)
-            self.expert_labels += sum(visits[keys[t]] > 1 for t, _ in labels)
+            self.expert_labels += sum(n for n in Counter(keys).values() if n > 1)  # every visit of a loop's pose
         else:
             labels = loop_free_labels(keys, actions) if success else []
         if labels:
