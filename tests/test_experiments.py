@@ -1,6 +1,8 @@
 """`dopt experiment run/report` on a tiny grid of the state apartment: local pool, resume, Ray."""
 
 import json
+import shutil
+import tempfile
 
 import numpy as np
 import pandas as pd
@@ -213,11 +215,14 @@ def test_ray_backend_runs_two_tiny_runs(zoo, tmp_path):
     experiment = load_experiment(str(_grid(tmp_path, zoo, seeds=(0, 1))))
     experiment.cells = {"disagreement": experiment.cells["disagreement"]}
     out = tmp_path / "results"
-    ray.init(num_cpus=1, include_dashboard=False, log_to_driver=False)  # one worker, imported once
+    # Ray's session files go to a folder of the test's own (a short path: Ray's sockets live in it), not /tmp/ray.
+    session = tempfile.mkdtemp(prefix="ray-")
+    ray.init(num_cpus=1, include_dashboard=False, log_to_driver=False, _temp_dir=session)  # one worker, imported once
     try:
         results = run_experiment(experiment, out, backend="ray")
     finally:
         ray.shutdown()
+        shutil.rmtree(session, ignore_errors=True)
     assert sorted(r["seed"] for r in results) == [0, 1]
     for seed in (0, 1):
         folder = out / "disagreement" / f"seed-{seed}"

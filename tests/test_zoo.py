@@ -16,6 +16,7 @@ import sb3_disagree.envs  # noqa: F401
 from sb3_disagree import ACER
 from sb3_disagree.acer.policies import compact_averages
 from sb3_disagree.cli.app import app
+from sb3_disagree.envs.vec import make_vec
 from sb3_disagree.priors.zoo import Zoo, ZooError, identify_algorithm
 
 STATE_ID = "sb3_disagree/ApartmentState-v0"
@@ -193,7 +194,6 @@ def test_dagger_labels_with_the_expert_asked_for(monkeypatch, no_return):
     """--expert-no-return makes every DAgger label the expert's that does not return (the env's
     ``expert_action(no_return=True)``), and the card says so; by default the memoryless expert labels, as before."""
     from sb3_disagree.envs.navigation import NavigationEnv
-    from sb3_disagree.envs.vec import make_vec
     from sb3_disagree.priors.make import train_dagger
 
     asked, expert_action = [], NavigationEnv.expert_action
@@ -207,6 +207,22 @@ def test_dagger_labels_with_the_expert_asked_for(monkeypatch, no_return):
                              expert_no_return=no_return)
     assert len(asked) == 80 and set(asked) == {no_return}
     assert record.get("expert_no_return", False) == no_return
+
+
+@pytest.mark.parametrize("method", ["acer", "ppo"])
+def test_training_a_prior_by_rl_leaves_nothing_in_the_temp_dir(monkeypatch, tmp_path, method):
+    """SB3's default logger makes a folder in the temp dir for every learn(); a prior's training writes nowhere."""
+    import tempfile
+
+    from sb3_disagree.priors.make import train_rl
+
+    temp = tmp_path / "tmp"
+    temp.mkdir()
+    monkeypatch.setattr(tempfile, "tempdir", str(temp))
+    monkeypatch.delenv("SB3_LOGDIR", raising=False)
+    model, record = train_rl(make_vec(STATE_ID, "toilet", n_envs=2), method, steps=64)
+    assert model.num_timesteps >= 64 and record["method"] == method
+    assert list(temp.iterdir()) == []
 
 
 def test_similarity_command_and_heatmap(tmp_path):
@@ -345,7 +361,6 @@ def test_a_validated_phase_ends_on_its_best_round(tmp_path):
     keeps its best epoch and the phase its best round (ties: the later), whose weights the prior ends with (validated
     again, it scores what was recorded); a negative count is refused by both commands before anything is written."""
     from sb3_disagree.defaults import PRIOR_VALIDATION_SEED
-    from sb3_disagree.envs.vec import make_vec
     from sb3_disagree.evaluation import evaluate
     from sb3_disagree.priors.make import refine_prior
 

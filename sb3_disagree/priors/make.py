@@ -24,6 +24,7 @@ from sb3_disagree.acer.torch_layers import CNN_SEES, loop_flags_kwargs
 from sb3_disagree.defaults import PRIOR_VALIDATION_SEED
 from sb3_disagree.envs.vec import make_vec
 from sb3_disagree.evaluation import Evaluation, evaluate
+from sb3_disagree.run.logs import silent_logger
 
 METHODS = ("dagger", "acer", "ppo")
 # Small image networks keep a zoo of ten priors well under 60 MB.
@@ -228,6 +229,7 @@ def train_rl(env: VecEnv, method: str, steps: int, seed: int = 0, progress_bar: 
         model = PPO(name, env, seed=seed, policy_kwargs=PRIOR_POLICY_KWARGS[name])
     else:
         raise ValueError(f"method must be one of {', '.join(METHODS)}, got {method!r}")
+    model.set_logger(silent_logger())
     model.learn(steps, progress_bar=progress_bar)
     return model, {"method": method, "steps": steps, "seed": seed, "seconds": round(time.perf_counter() - start, 1)}
 

@@ -5,6 +5,7 @@ from pathlib import Path
 
 from stable_baselines3.common.logger import CSVOutputFormat, Logger, make_output_format
 
+
 class AppendingCSVOutputFormat(CSVOutputFormat):
     """``progress.csv`` of a resumed run: the earlier rows stay, new rows follow (SB3's format truncates)."""
 
@@ -24,3 +25,8 @@ def run_logger(run_dir: Path, append: bool) -> Logger:
     return Logger(str(run_dir), [csv, make_output_format("tensorboard", str(run_dir))])
 
 
+
+
+def silent_logger() -> Logger:
+    """A logger that writes nothing: SB3's own default for ``verbose=0`` still makes an empty folder in the temp dir."""
+    return Logger(None, [])
