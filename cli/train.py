@@ -1,5 +1,6 @@
 """``dopt train`` and ``dopt eval``: the method on the command line, with a live display."""
 
+import math
 import time
 from pathlib import Path
 from typing import Optional
@@ -178,8 +179,10 @@ def _show_round(r) -> None:
     where = f"a round: {r.env_steps:,} env steps" if r.env_steps else "the training's last episodes"
     kept = (f"; validated greedy {', '.join(f'{v:.2f}' for v in r.validation)} after each epoch, kept epoch {r.epoch}"
             if r.validation else "")
+    fit = (f"fit loss {r.loss:.3f}, accuracy {r.accuracy:.2f}{kept}" if not math.isnan(r.loss)
+           else "nothing to fit, the policy stays as trained")
     console.print(f"greedy consistency, {where}, {r.successes}/{r.episodes} episodes "
-                  f"reached the goal, {r.labels:,} labels; fit loss {r.loss:.3f}, accuracy {r.accuracy:.2f}{kept}")
+                  f"reached the goal, {r.labels:,} labels; {fit}")
 
 
 def _priors(text: str):
@@ -235,9 +238,12 @@ def _show_end(run_dir: Path, model, finished: bool, goal: str) -> None:
         line = f"done: {model.num_timesteps:,} steps"
         if phase.get("env_steps"):
             line += f" of training and {int(phase['env_steps']):,} of the greedy-consistency phase"
-        if phase.get("harvest"):  # labels from the training's own last episodes
-            line += (f" (model.zip fitted to the loop-free paths of the successful episodes of its last "
-                     f"{min(int(saved['consistency_harvest']), model.num_timesteps):,} training steps)")
+        harvest = phase.get("harvest")  # labels from the training's own last episodes
+        last = f"its last {min(int(saved.get('consistency_harvest') or 0), model.num_timesteps):,} training steps"
+        if harvest and not harvest["labels"] and not phase.get("env_steps"):
+            line += f" (no episode of {last} reached the goal: model.zip is the trained policy)"
+        elif harvest:
+            line += f" (model.zip fitted to the loop-free paths of the successful episodes of {last})"
         elif phase:
             line += " (model.zip is its policy)"
         console.print(line + f"; wrote {run_dir}")

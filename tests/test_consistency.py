@@ -391,6 +391,22 @@ def test_dopt_train_fits_model_zip_to_the_harvest_of_its_own_episodes(tmp_path):
     assert changed == (phase["harvest"]["labels"] > 0)
 
 
+def test_dopt_train_says_so_when_its_harvest_has_nothing_to_fit(tmp_path):
+    """No episode ends within 200 steps (the cut is 500): no labels, no fit, and no nan in what the user reads."""
+    result = runner.invoke(app, ["train", "--goal", "bathtub", "--env", "sb3_disagree/ApartmentState-v0", "--mode",
+                                 "scratch", "--steps", "200", "--n-envs", "2", "--card-episodes", "0", "--out",
+                                 str(tmp_path), "--consistency-harvest", "200"])
+    assert result.exit_code == 0, result.output
+    words = " ".join(result.output.split())
+    assert "0/0 episodes reached the goal, 0 labels; nothing to fit, the policy stays as trained" in words
+    assert "(no episode of its last 200 training steps reached the goal: model.zip is the trained policy)" in words
+    assert "nan" not in words and "fitted" not in words
+    (run_dir,) = tmp_path.glob("*/bathtub/scratch-0")
+    (checkpoint,) = (run_dir / "checkpoints").iterdir()
+    obs = np.random.default_rng(0).uniform(-1, 1, (64, 4)).astype(np.float32)
+    assert np.array_equal(_probs(ACER.load(checkpoint / "model.zip"), obs), _probs(ACER.load(run_dir / "model.zip"), obs))
+
+
 def test_dopt_train_validates_the_harvest_fit_epoch_by_epoch(tmp_path):
     base = ["train", "--goal", "bathtub", "--env", "sb3_disagree/ApartmentState-v0", "--mode", "scratch", "--steps",
             "600", "--n-envs", "2", "--card-episodes", "0", "--out", str(tmp_path)]
