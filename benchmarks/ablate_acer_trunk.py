@@ -12,6 +12,7 @@ import torch as th
 from stable_baselines3.common.env_util import make_vec_env
 
 from sb3_disagree import ACER
+from sb3_disagree.run.logs import silent_logger
 
 ARMS = {"shared [64, 64]": [64, 64], "separate pi [64, 64], qf [64, 64]": dict(pi=[64, 64], qf=[64, 64])}
 
@@ -26,6 +27,7 @@ def main() -> None:
         env = make_vec_env("Acrobot-v1", n_envs=4, seed=args.seed)
         model = ACER("MlpPolicy", env, seed=args.seed, ent_coef=0.0, learning_rate=7e-4, replay_ratio=4,
                      policy_kwargs=dict(net_arch=net_arch))
+        model.set_logger(silent_logger())  # SB3's default logger leaves a folder in the temp dir
         curve = []
         for _ in range(args.steps // 10_000):
             model.learn(10_000, reset_num_timesteps=False)

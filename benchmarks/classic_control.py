@@ -46,6 +46,13 @@ def load_hyperparams(algo: str, env_id: str) -> dict[str, Any]:
     return kwargs
 
 
+def silent_logger():
+    """SB3's default logger leaves a folder in the temp dir for every learn(); this one writes nothing."""
+    from sb3_disagree.run.logs import silent_logger
+
+    return silent_logger()
+
+
 def algo_class(algo: str):
     if algo == "acer":
         from sb3_disagree import ACER
@@ -73,6 +80,7 @@ def run_one(algo: str, env_id: str, seed: int, budget: int, eval_freq: int, over
     env = make_vec_env(env_id, n_envs=n_envs, seed=seed)
     eval_env = make_vec_env(env_id, n_envs=1, seed=seed + 10_000)
     model = algo_class(algo)(policy, env, seed=seed, verbose=0, **kwargs)
+    model.set_logger(silent_logger())
 
     class Evaluate(BaseCallback):
         def __init__(self) -> None:
@@ -178,6 +186,7 @@ def cmd_throughput(args: argparse.Namespace) -> None:
             kwargs.pop("n_timesteps", None)
             n_envs, policy = kwargs.pop("n_envs", 1), kwargs.pop("policy")
             model = algo_class(algo)(policy, make_vec_env(env_id, n_envs=n_envs, seed=0), seed=0, **kwargs)
+            model.set_logger(silent_logger())
             model.learn(2_000)  # warm-up (ACER's replay starts after 1 000 transitions)
             start = time.perf_counter()
             model.learn(args.steps, reset_num_timesteps=False)

@@ -17,6 +17,7 @@ from stable_baselines3.common.env_util import make_vec_env
 
 import sb3_disagree  # noqa: F401  (registers the envs)
 from sb3_disagree.priors import Zoo
+from sb3_disagree.run.logs import silent_logger
 
 ENV = "sb3_disagree/ApartmentState-v0"
 
@@ -33,6 +34,7 @@ def main() -> None:
             "MlpPolicy", env, buffer_size=5_000, verbose=0,
             policy_kwargs=dict(guide_policy=guide, max_horizon=100, horizons=horizons, tolerance=0.05, window_size=1,
                                eval_freq=500, n_eval_episodes=2))
+        model.set_logger(silent_logger())  # SB3's default logger leaves a folder in the temp dir
         model.learn(2_000)
         print(f"ran: guide horizon {model.policy.horizon} after 2k steps")
     except Exception as exc:  # what stops it is the finding

@@ -15,6 +15,7 @@ from docs_section import write_section
 from stable_baselines3.common.env_util import make_vec_env
 
 from sb3_disagree import ACER
+from sb3_disagree.run.logs import silent_logger
 
 
 def main() -> None:
@@ -25,6 +26,7 @@ def main() -> None:
     args = parser.parse_args()
     th.set_num_threads(1)
     model = ACER("MlpPolicy", make_vec_env("CartPole-v1", n_envs=8, seed=0), seed=0, ent_coef=0.0)
+    model.set_logger(silent_logger())  # SB3's default logger leaves a folder in the temp dir
     model.learn(2_000)  # warm-up: fills the buffer past replay_start
     profiler = cProfile.Profile()
     start = time.perf_counter()

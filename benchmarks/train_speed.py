@@ -57,11 +57,13 @@ def ppo_rate(steps: int, warm: int, vec_env: str) -> float:
     from stable_baselines3 import PPO
 
     from sb3_disagree.run import RunConfig, build_env
+    from sb3_disagree.run.logs import silent_logger
 
     env = build_env(RunConfig(goal="bathtub", vec_env=vec_env), None)  # the envs dopt train makes
     # rl-zoo3's Atari settings for PPO, with 4 envs.
     model = PPO("CnnPolicy", env, n_steps=128, n_epochs=4, batch_size=256, learning_rate=2.5e-4, clip_range=0.1,
                 ent_coef=0.01, vf_coef=0.5, seed=0)
+    model.set_logger(silent_logger())  # SB3's default logger leaves a folder in the temp dir
     rate = Rate(warm)
     model.learn(warm + steps, callback=rate)
     env.close()
