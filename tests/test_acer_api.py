@@ -1,5 +1,6 @@
 """ACER in the SB3 API: save/load, replay buffer I/O, images, callbacks, logging, learning."""
 
+import copy
 import io
 import zipfile
 
@@ -276,9 +277,9 @@ class CountingACER(ACER):
         self.draws = [*getattr(self, "draws", []), n]
         return n
 
-    def _replay(self, policy, n_replay, rng=None):
+    def _replay(self, policy, n_replay, rng=None, batches=None):
         self.batches = [*getattr(self, "batches", []), n_replay]
-        return super()._replay(policy, n_replay, rng)
+        return super()._replay(policy, n_replay, rng, batches)
 
 
 def test_overlap_caps_the_replays_per_segment_and_carries_the_rest():
@@ -294,6 +295,49 @@ def test_overlap_caps_the_replays_per_segment_and_carries_the_rest():
     assert sum(model.batches) == sum(model.draws) and model._n_updates == segments + sum(model.draws)
     owed = np.cumsum(model.draws) - np.cumsum(model.batches[:-1])
     assert np.array_equal(model.batches[:-1], np.minimum(owed + model.batches[:-1], cap))
+
+
+def test_an_update_given_the_average_networks_probabilities_is_the_update():
+    """The trust region's reference handed in (``average_ahead``) as the average network computes it gives the
+    same step, bit for bit; another reference gives another step (a tight trust region, so that it binds)."""
+    model = ACER("MlpPolicy", make_vec_env(ChainEnv, n_envs=2, seed=0), n_steps=5, seed=0, delta=1e-4)
+    model.learn(40)
+    segment = model.replay_buffer.sample(np.random.default_rng(0))
+    n = segment.actions.size
+    policies = [copy.deepcopy(model.policy) for _ in range(3)]
+    with th.no_grad():
+        own = th.softmax(policies[1].average_logits(model._segment_obs(segment)[:n]), dim=-1)
+    model._update(segment, policies[0])
+    model._update(segment, policies[1], own)
+    model._update(segment, policies[2], th.full_like(own, 1 / own.shape[1]))
+    flat = [th.cat([p.detach().flatten() for p in policy.parameters()]) for policy in policies]
+    assert th.equal(flat[0], flat[1]) and not th.equal(flat[0], flat[2])
+
+
+def test_average_ahead_replays_the_same_segments_with_the_reference_computed_before():
+    """With ``average_ahead`` the replays are drawn as without it (the same segments, the same number of updates),
+    each with the reference of the average network as it was when the segment's replays were handed over."""
+    models = {}
+    for ahead in (False, True):
+        model = CountingACER("MlpPolicy", make_vec_env(ChainEnv, n_envs=2, seed=0), n_steps=5, seed=0,
+                             replay_start=10, overlap=True, average_ahead=ahead, delta=1e-4)  # a binding trust region
+        drawn, sample = [], model.replay_buffer.sample
+
+        def recording(rng=None, sample=sample, drawn=drawn):
+            segment = sample(rng)
+            drawn.append(segment.rewards.copy())
+            return segment
+
+        model.replay_buffer.sample = recording
+        model.learn(300)
+        models[ahead] = (model, drawn)
+    (plain, plain_drawn), (ahead, ahead_drawn) = models[False], models[True]
+    assert plain.batches == ahead.batches and plain._n_updates == ahead._n_updates
+    assert len(plain_drawn) == len(ahead_drawn) and all(np.array_equal(a, b) for a, b in zip(plain_drawn, ahead_drawn))
+    weights = [th.cat([p.detach().flatten() for p in m.policy.parameters()]) for m in (plain, ahead)]
+    assert not th.equal(*weights)  # the older reference changes the steps
+    with pytest.raises(ValueError, match="needs overlap"):
+        ACER("MlpPolicy", make_vec_env(ChainEnv, n_envs=2, seed=0), average_ahead=True)
 
 
 def test_bfloat16_features_keep_the_heads_and_acting_in_float32_and_round_trip(tmp_path):

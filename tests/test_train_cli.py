@@ -158,6 +158,17 @@ def test_overlap_is_the_default_and_can_be_turned_off(zoo, tmp_path):
         assert ACER.load(run / "model.zip").overlap is overlap
 
 
+def test_average_ahead_reaches_acer_and_needs_the_overlapped_loop(zoo, tmp_path):
+    result = runner.invoke(app, _train_args(zoo, tmp_path / "bad", "--no-overlap", "--average-ahead"))
+    assert result.exit_code == 2 and "needs the overlapped loop" in result.output
+    assert len(result.output.strip().splitlines()) == 1 and not (tmp_path / "bad").exists()
+    result = runner.invoke(app, _train_args(zoo, tmp_path, "--average-ahead"))
+    assert result.exit_code == 0, result.output
+    run = tmp_path / "sb3_disagree__ApartmentState-v0" / "bathtub" / "disagreement-0"
+    assert yaml.safe_load((run / "config.yaml").read_text())["acer_kwargs"]["average_ahead"] is True
+    assert ACER.load(run / "model.zip").average_ahead
+
+
 def test_reward_scale_and_ema_decay_reach_acer_and_keep_the_other_defaults(zoo, tmp_path):
     from sb3_disagree.run import ACER_KWARGS
 

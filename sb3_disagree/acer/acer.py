@@ -96,6 +96,10 @@ class ACER(BaseAlgorithm):
         (the rest of a large Poisson draw is carried to the next). ``self.policy`` (what callbacks,
         ``predict`` and ``save`` see) is the acting copy, synchronised with the learner, optimizer state
         included, after every on-policy update and when ``learn`` ends or is interrupted.
+    :param average_ahead: With ``overlap``, the rollout thread draws each segment's replay batches and computes the
+        trust region's reference on them (the average network's probabilities) before handing them to the worker,
+        which then does one forward pass less per replay update; the reference is then up to
+        ``ceil(replay_ratio)`` updates older (docs/acer.md, item 24). Needs ``overlap``
     :param stats_window_size: Window size for the rollout logging, number of episodes to average
     :param tensorboard_log: The log location for tensorboard (if None, no logging)
     :param policy_kwargs: Additional arguments to be passed to the policy on creation
@@ -138,6 +142,7 @@ class ACER(BaseAlgorithm):
         features_dtype: Optional[str] = None,
         behaviour: Optional[BehaviourPolicy] = None,
         overlap: bool = False,
+        average_ahead: bool = False,
         stats_window_size: int = 100,
         tensorboard_log: Optional[str] = None,
         policy_kwargs: Optional[dict[str, Any]] = None,
@@ -191,6 +196,9 @@ class ACER(BaseAlgorithm):
         self.distill_states = distill_states
         self.behaviour = behaviour
         self.overlap = overlap
+        if average_ahead and not overlap:
+            raise ValueError("average_ahead computes the replays' reference while the worker replays: it needs overlap")
+        self.average_ahead = average_ahead
         # Set by a harvest of the training's own episodes (consistency.HarvestLabels): the behaviour's own branch
         # samples from the weights model.zip acts with (the moving average), whose paths the harvest fits.
         self.act_with_average = False
@@ -371,13 +379,23 @@ class ACER(BaseAlgorithm):
 
     # ------------------------------------------------------------------ updates
 
-    def _update(self, segment: Segment, policy: Optional[ACERPolicy] = None) -> dict[str, float]:
-        """One gradient step of ``policy`` (``self.policy`` if None) on a (T, E) segment batch; returns statistics."""
+    def _segment_obs(self, segment: Segment) -> th.Tensor:
+        """A segment's observations, its T + 1 steps of E envs flattened, the last step's E last."""
+        obs = th.as_tensor(segment.observations, device=self.device)
+        return obs.reshape(-1, *obs.shape[2:])
+
+    def _update(self, segment: Segment, policy: Optional[ACERPolicy] = None,
+                reference: Optional[th.Tensor] = None) -> dict[str, float]:
+        """
+        One gradient step of ``policy`` (``self.policy`` if None) on a (T, E) segment batch; returns statistics.
+
+        :param reference: The trust region's reference on the segment's T * E states, the average network's
+            probabilities (computed here from ``policy``'s average network if None)
+        """
         policy = self.policy if policy is None else policy
         n_steps, n_envs = segment.actions.shape
         n = n_steps * n_envs
-        obs = th.as_tensor(segment.observations, device=self.device)
-        obs = obs.reshape(n + n_envs, *obs.shape[2:])
+        obs = self._segment_obs(segment)
         actions = th.as_tensor(segment.actions, device=self.device).reshape(n)
         mu = th.as_tensor(segment.mu, device=self.device).reshape(n, -1)
         rewards = th.as_tensor(segment.rewards, device=self.device)
@@ -415,7 +433,7 @@ class ACER(BaseAlgorithm):
         (g,) = th.autograd.grad(objective * n, f)
         tr_scale = th.zeros(n, device=self.device)
         if self.trust_region:
-            average_probs = th.softmax(policy.average_logits(obs[:n]), dim=-1)
+            average_probs = th.softmax(policy.average_logits(obs[:n]), dim=-1) if reference is None else reference
             k = -average_probs / (f.detach() + EPS)
             g, tr_scale = trust_region_project(g, k, self.delta)
         loss = -(probs * g.detach()).sum() / n + self.q_coef * q_loss
@@ -480,11 +498,26 @@ class ACER(BaseAlgorithm):
             return 0
         return int(np.random.poisson(self.replay_ratio) if rng is None else rng.poisson(self.replay_ratio))
 
-    def _replay(self, policy: ACERPolicy, n_replay: int, rng: Optional[np.random.Generator] = None) -> int:
-        """``n_replay`` updates of ``policy`` on segments drawn from the replay buffer with ``rng``."""
-        for _ in range(n_replay):
-            self._update(self.replay_buffer.sample(rng), policy)
+    def _replay(self, policy: ACERPolicy, n_replay: int, rng: Optional[np.random.Generator] = None,
+                batches: Optional[list[tuple[Segment, th.Tensor]]] = None) -> int:
+        """``n_replay`` updates of ``policy`` on segments drawn from the replay buffer with ``rng``, or on
+        ``batches`` (segments with their trust region's reference, :meth:`_replay_ahead`) where given."""
+        if batches is None:
+            batches = [(self.replay_buffer.sample(rng), None) for _ in range(n_replay)]
+        for segment, reference in batches:
+            self._update(segment, policy, reference)
         return n_replay
+
+    def _replay_ahead(self, policy: ACERPolicy, n_replay: int, rng: np.random.Generator) -> list[tuple[Segment, th.Tensor]]:
+        """``n_replay`` segments drawn from the replay buffer with ``rng`` (as :meth:`_replay` would draw them),
+        each with the trust region's reference computed now by ``policy``'s average network (``average_ahead``)."""
+        batches = []
+        with th.no_grad():
+            for _ in range(n_replay):
+                segment = self.replay_buffer.sample(rng)
+                obs = self._segment_obs(segment)[:segment.actions.size]
+                batches.append((segment, th.softmax(policy.average_logits(obs), dim=-1)))
+        return batches
 
     def _record_train(self, stats: dict[str, float]) -> None:
         for key, value in stats.items():

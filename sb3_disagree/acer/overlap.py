@@ -70,7 +70,12 @@ def overlapped_updates(model: Any) -> Iterator[Callable[[Optional[Segment]], Non
         backlog += model._replay_count(counts)
         n_replay = min(backlog, cap)
         backlog -= n_replay
-        pending.append(replays.submit(model._replay, learner, n_replay, samples))
+        batches = None
+        if model.average_ahead:  # the worker is idle until the submit below
+            th.set_num_threads(threads)
+            batches = model._replay_ahead(learner, n_replay, samples)
+            th.set_num_threads(half)
+        pending.append(replays.submit(model._replay, learner, n_replay, samples, batches))
 
     threads = th.get_num_threads()
     half = max(1, threads // 2)

@@ -228,6 +228,9 @@ class RunConfig:
             raise ValueError(f"--reward-scale must be a number > 0, got {reward_scale!r}")
         if self.acer_kwargs.get("features_dtype") not in (None, "float32", "bfloat16"):
             raise ValueError(f"--features-dtype must be float32 or bfloat16, got {self.acer_kwargs['features_dtype']!r}")
+        if self.acer_kwargs.get("average_ahead") and not self.overlap:
+            raise ValueError("--average-ahead computes the replays' reference while the worker replays: it needs "
+                             "the overlapped loop (drop --no-overlap)")
         ema_decay = self.acer_kwargs.get("ema_decay", 0.0)
         if isinstance(ema_decay, bool) or not isinstance(ema_decay, (int, float)) or not 0 <= ema_decay < 1:
             raise ValueError(f"--ema-decay must be a number in [0, 1), got {ema_decay!r}")
