@@ -4,9 +4,9 @@ to end and its saved model evaluated alone both ways. Compact results go to benc
 (config.yaml, eval.txt, time.txt, the log's last lines).
 
     python benchmarks/default_budget.py run OUT [--seeds 0 1 2 3 4] [--goals bathtub nightstand] [--steps N]
-        [--replay-ratio R] [--features-dtype bfloat16]
+        [--replay-ratio R] [--features-dtype bfloat16] [--average-ahead]
         # for each seed, each goal (skipping those done): /usr/bin/time -v dopt train --goal G --seed S --out OUT/G-S
-        # [--steps N] [--features-dtype D], then dopt eval RUN --episodes 100 (100 episodes each way from the run's final-evaluation env
+        # [--steps N] [--features-dtype D] [--average-ahead], then dopt eval RUN --episodes 100 (100 episodes each way from the run's final-evaluation env
         # seeds). With --replay-ratio (not a dopt train option), the run is dopt train's default as a default run's
         # config.yaml resolves it (--like, the shipped make-run's), ACER's replay ratio replaced, through the library
     python benchmarks/default_budget.py table OUT/G-S [...]   # one row per run, then the means per task
@@ -34,7 +34,7 @@ LIKE = RESULTS.parent / "validated-fit" / "make-run" / "config.yaml"
 
 
 def run(out: Path, seeds: list[int], goals: list[str], steps: Optional[int], replay_ratio: Optional[float],
-        like: Path, features_dtype: Optional[str] = None) -> None:
+        like: Path, features_dtype: Optional[str] = None, average_ahead: bool = False) -> None:
     dopt = Path(sys.executable).parent / "dopt"
     for seed in seeds:
         for goal in goals:
@@ -45,7 +45,8 @@ def run(out: Path, seeds: list[int], goals: list[str], steps: Optional[int], rep
             if replay_ratio is None:
                 command = [str(dopt), "train", "--goal", goal, "--seed", str(seed), "--out", str(folder),
                            *(["--steps", str(steps)] if steps else []),
-                           *(["--features-dtype", features_dtype] if features_dtype else [])]
+                           *(["--features-dtype", features_dtype] if features_dtype else []),
+                           *(["--average-ahead"] if average_ahead else [])]
             else:
                 command = [sys.executable, __file__, "variant", goal, str(seed), str(folder), str(like),
                            str(steps or 100_000), str(replay_ratio)]
@@ -160,6 +161,7 @@ if __name__ == "__main__":
     p.add_argument("--steps", type=int)
     p.add_argument("--replay-ratio", type=float)
     p.add_argument("--features-dtype", help="passed to dopt train")
+    p.add_argument("--average-ahead", action="store_true", help="passed to dopt train")
     p.add_argument("--like", type=Path, default=LIKE)
     p = sub.add_parser("variant")
     for name, kind in (("goal", str), ("seed", int), ("out", Path), ("like", Path), ("steps", int),
@@ -174,7 +176,8 @@ if __name__ == "__main__":
     p.add_argument("folders", type=Path, nargs="+")
     args = parser.parse_args()
     if args.command == "run":
-        run(args.out, args.seeds, args.goals, args.steps, args.replay_ratio, args.like, args.features_dtype)
+        run(args.out, args.seeds, args.goals, args.steps, args.replay_ratio, args.like, args.features_dtype,
+            args.average_ahead)
     elif args.command == "variant":
         variant(args.goal, args.seed, args.out, args.like, args.steps, args.replay_ratio)
     elif args.command == "table":
