@@ -23,6 +23,8 @@ import numpy as np
 import yaml
 from docs_section import write_section
 
+from sb3_disagree.run.logs import silent_logger
+
 ROOT = Path(__file__).resolve().parent
 RESULTS = ROOT / "results" / "classic"
 ALGOS = ["acer", "a2c", "ppo", "dqn"]
@@ -44,13 +46,6 @@ def load_hyperparams(algo: str, env_id: str) -> dict[str, Any]:
             value = eval(value, {"dict": dict})  # rl-zoo3 stores policy_kwargs as a Python expression
         kwargs[key] = value
     return kwargs
-
-
-def silent_logger():
-    """SB3's default logger leaves a folder in the temp dir for every learn(); this one writes nothing."""
-    from sb3_disagree.run.logs import silent_logger
-
-    return silent_logger()
 
 
 def algo_class(algo: str):
@@ -80,7 +75,7 @@ def run_one(algo: str, env_id: str, seed: int, budget: int, eval_freq: int, over
     env = make_vec_env(env_id, n_envs=n_envs, seed=seed)
     eval_env = make_vec_env(env_id, n_envs=1, seed=seed + 10_000)
     model = algo_class(algo)(policy, env, seed=seed, verbose=0, **kwargs)
-    model.set_logger(silent_logger())
+    model.set_logger(silent_logger())  # SB3's default logger leaves a folder in the temp dir
 
     class Evaluate(BaseCallback):
         def __init__(self) -> None:

@@ -502,9 +502,8 @@ class ACER(BaseAlgorithm):
                 batches: Optional[list[tuple[Segment, th.Tensor]]] = None) -> int:
         """``n_replay`` updates of ``policy`` on segments drawn from the replay buffer with ``rng``, or on
         ``batches`` (segments with their trust region's reference, :meth:`_replay_ahead`) where given."""
-        if batches is None:
-            batches = [(self.replay_buffer.sample(rng), None) for _ in range(n_replay)]
-        for segment, reference in batches:
+        for i in range(n_replay):
+            segment, reference = (self.replay_buffer.sample(rng), None) if batches is None else batches[i]
             self._update(segment, policy, reference)
         return n_replay
 
