@@ -4,9 +4,9 @@ two ways, in fresh processes taking turns so that the machine's slow spells fall
 warm-up and the process's minor page faults. Written into docs/benchmarks.md. ``--set allocator``: glibc's default
 settings against ``sb3_disagree.allocator.keep_freed_memory`` (what ``train`` applies); ``--set teacher``: the
 kickstarting teacher computed at each step against once per rollout (``PriorTeacher``'s default), both with the
-allocator's settings.
+allocator's settings; ``--set average-ahead``: ACER's ``average_ahead`` off and on.
 
-    python benchmarks/default_run_speed.py [--set allocator|teacher] [--steps 12000] [--warm 2400] [--repeats 2] [--write]
+    python benchmarks/default_run_speed.py [--set allocator|teacher|average-ahead] [--steps 12000] [--warm 2400] [--repeats 2] [--write]
 """
 
 import argparse
@@ -35,12 +35,14 @@ from sb3_disagree.run import RunConfig, train
 with TemporaryDirectory() as tmp:
     rate = Rate({warm})
     config = RunConfig(goal="bathtub", mode="kickstart", priors=["shower", "toilet"], steps={warm} + {steps},
-                       overlap=True, frame_stack=3, loop_flags=True)
+                       overlap=True, frame_stack=3, loop_flags=True,
+                       acer_kwargs={{"average_ahead": True}} if {variant!r} == "average_ahead on" else {{}})
     train(config, Path(tmp), callbacks=[rate])
 print(json.dumps({{"rate": rate.rate(), "minflt": resource.getrusage(resource.RUSAGE_SELF).ru_minflt}}))
 """
 SETS = {"allocator": ("glibc defaults", "keep_freed_memory"),
-        "teacher": ("teacher at each step", "teacher once per rollout")}
+        "teacher": ("teacher at each step", "teacher once per rollout"),
+        "average-ahead": ("average_ahead off", "average_ahead on")}
 
 
 def timed(variant: str, steps: int, warm: int) -> dict:
