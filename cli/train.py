@@ -84,11 +84,12 @@ def _run_options() -> list:
                                   "frame_stack": None, "loop_flags": None, "greedy_phase": None,
                                   "consistency_validation": None}),
             *options_of(run, only=("out", "resume", "force"), types={"resume": Optional[Path], "out": Path}),
-            *options_of(_cli_only)]
+            *options_of(_cli_only, flags={"average_ahead": "--average-ahead/--no-average-ahead"})]
 
 
 def _cli_only(card_episodes: int = 20, progress_every: float = 30.0, reward_scale: Optional[float] = None,
-              ema_decay: Optional[float] = None, features_dtype: Optional[str] = None, average_ahead: bool = False,
+              ema_decay: Optional[float] = None, features_dtype: Optional[str] = None,
+              average_ahead: Optional[bool] = None,
               collision_penalty: Optional[float] = None, reward_distance: Optional[str] = None) -> None:
     """
     :param reward_scale: Rewards in ACER's updates are multiplied by this (default: the mode's; 1.0 for
@@ -102,7 +103,8 @@ def _cli_only(card_episodes: int = 20, progress_every: float = 30.0, reward_scal
         default: all float32; docs/results.md, "bfloat16 features")
     :param average_ahead: With the overlapped loop, the trust region's reference for the replay updates is computed
         by the rollout thread before it hands them over (faster on two cores; the reference up to ceil(replay_ratio)
-        updates older; docs/acer.md, item 24). Off by default: not yet measured on whole runs' policies
+        updates older; docs/acer.md, item 24). Default: on for a new --mode kickstart run with the overlapped loop,
+        where it was measured (docs/results.md), else off
     :param collision_penalty: Subtracted from the env's reward on a blocked move_forward (the env's
         collision_penalty; default 0, the paper's reward); what counts as success is unchanged
     :param reward_distance: What the env's reward distance follows: "euclidean" (the apartment's default, the
@@ -124,7 +126,10 @@ def train(**options) -> None:
         out, resume, force, card_episodes, every = (
             options.pop(k) for k in ("out", "resume", "force", "card_episodes", "progress_every"))
         options["acer_kwargs"] = {k: v for k in ("reward_scale", "ema_decay", "features_dtype") if (v := options.pop(k)) is not None}
-        if options.pop("average_ahead"):
+        ahead = options.pop("average_ahead")
+        if ahead is None:  # dopt train's default: measured on new kickstarting runs, which the overlapped loop runs
+            ahead = resume is None and options["mode"] == "kickstart" and options["overlap"]
+        if ahead:
             options["acer_kwargs"]["average_ahead"] = True
         options["env_kwargs"] = {k: v for k in ("collision_penalty", "reward_distance") if (v := options.pop(k)) is not None}
         steps = options["steps"]

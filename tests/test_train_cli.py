@@ -45,6 +45,8 @@ def test_train_writes_the_run_folder(zoo, tmp_path, mode):
     assert (cfg["consistency_harvest"], cfg["consistency_harvest_average"], cfg["greedy_phase"]) == (
         (30_000, False, 400) if mode == "kickstart" else (0, False, 0))
     assert cfg["consistency_validation"] == (40 if mode == "kickstart" else 0)  # the harvest's fit, validated
+    # the replays' reference computed ahead: a new kickstarting run's default, in the overlapped loop dopt train runs
+    assert cfg["acer_kwargs"].get("average_ahead", False) is (mode == "kickstart")
     assert ("harvest" in (cfg.get("consistency") or {})) == (mode == "kickstart")
     assert (cfg["frame_stack"], cfg["loop_flags"]) == (1, False)  # state observations: no frames to compare
     if mode == "finetune":  # started from the nearest prior: its policy head, a Q head of its own
@@ -167,6 +169,14 @@ def test_average_ahead_reaches_acer_and_needs_the_overlapped_loop(zoo, tmp_path)
     run = tmp_path / "sb3_disagree__ApartmentState-v0" / "bathtub" / "disagreement-0"
     assert yaml.safe_load((run / "config.yaml").read_text())["acer_kwargs"]["average_ahead"] is True
     assert ACER.load(run / "model.zip").average_ahead
+    # on by default for kickstarting; off when asked, and off by itself without the overlapped loop
+    for extra in (("--no-average-ahead",), ("--no-overlap",)):
+        out = tmp_path / extra[0]
+        result = runner.invoke(app, _train_args(zoo, out, "--mode", "kickstart", *extra))
+        assert result.exit_code == 0, result.output
+        run = out / "sb3_disagree__ApartmentState-v0" / "bathtub" / "kickstart-0"
+        assert "average_ahead" not in yaml.safe_load((run / "config.yaml").read_text())["acer_kwargs"]
+        assert not ACER.load(run / "model.zip").average_ahead
 
 
 def test_reward_scale_and_ema_decay_reach_acer_and_keep_the_other_defaults(zoo, tmp_path):
@@ -178,7 +188,8 @@ def test_reward_scale_and_ema_decay_reach_acer_and_keep_the_other_defaults(zoo, 
     assert result.exit_code == 0, result.output
     run = tmp_path / "sb3_disagree__ApartmentState-v0" / "bathtub" / "kickstart-0"
     saved = yaml.safe_load((run / "config.yaml").read_text())
-    assert saved["acer_kwargs"] == {**ACER_KWARGS, "reward_scale": 1.0, "ema_decay": 0.99}
+    assert saved["acer_kwargs"] == {**ACER_KWARGS, "reward_scale": 1.0, "ema_decay": 0.99,
+                                   "average_ahead": True}  # dopt train's default for kickstarting
     assert saved["env_kwargs"] == {"collision_penalty": 0.1, "reward_distance": "geodesic"}
     model = ACER.load(run / "model.zip")
     assert model.reward_scale == 1.0 and model.ema_decay == 0.99 and model.policy.ema_net is not None
