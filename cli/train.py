@@ -126,11 +126,7 @@ def train(**options) -> None:
         out, resume, force, card_episodes, every = (
             options.pop(k) for k in ("out", "resume", "force", "card_episodes", "progress_every"))
         options["acer_kwargs"] = {k: v for k in ("reward_scale", "ema_decay", "features_dtype") if (v := options.pop(k)) is not None}
-        ahead = options.pop("average_ahead")
-        if ahead is None:  # dopt train's default: measured on new kickstarting runs, which the overlapped loop runs
-            ahead = resume is None and options["mode"] == "kickstart" and options["overlap"]
-        if ahead:
-            options["acer_kwargs"]["average_ahead"] = True
+        _default_ahead(options, resume)
         options["env_kwargs"] = {k: v for k in ("collision_penalty", "reward_distance") if (v := options.pop(k)) is not None}
         steps = options["steps"]
         budget = steps or 100_000
@@ -168,6 +164,17 @@ def _default_harvest(options: dict, resume: Optional[Path], budget: int) -> None
     if options["consistency_validation"] is None:
         fitted = options["consistency_harvest"] or options["consistency_rounds"]
         options["consistency_validation"] = DOPT_TRAIN_VALIDATION if new_kickstart and fitted else 0
+
+
+def _default_ahead(options: dict, resume: Optional[Path]) -> None:
+    """dopt train's ``average_ahead`` where none is given: on for a new run of the default mode (kickstarting, where
+    it was measured) in the overlapped loop it needs; off otherwise, and a resumed run keeps its saved setting. Moves
+    the option into ``acer_kwargs`` (only when on, as ACER's default is off)."""
+    ahead = options.pop("average_ahead")
+    if ahead is None:
+        ahead = resume is None and options["mode"] == "kickstart" and options["overlap"]
+    if ahead:
+        options["acer_kwargs"]["average_ahead"] = True
 
 
 def _default_memory(options: dict, resume: Optional[Path]) -> None:

@@ -384,6 +384,11 @@ class ACER(BaseAlgorithm):
         obs = th.as_tensor(segment.observations, device=self.device)
         return obs.reshape(-1, *obs.shape[2:])
 
+    @staticmethod
+    def _average_probs(policy: ACERPolicy, obs: th.Tensor) -> th.Tensor:
+        """The trust region's reference on ``obs``: the average network's action probabilities (item 12)."""
+        return th.softmax(policy.average_logits(obs), dim=-1)
+
     def _update(self, segment: Segment, policy: Optional[ACERPolicy] = None,
                 reference: Optional[th.Tensor] = None) -> dict[str, float]:
         """
@@ -433,7 +438,7 @@ class ACER(BaseAlgorithm):
         (g,) = th.autograd.grad(objective * n, f)
         tr_scale = th.zeros(n, device=self.device)
         if self.trust_region:
-            average_probs = th.softmax(policy.average_logits(obs[:n]), dim=-1) if reference is None else reference
+            average_probs = self._average_probs(policy, obs[:n]) if reference is None else reference
             k = -average_probs / (f.detach() + EPS)
             g, tr_scale = trust_region_project(g, k, self.delta)
         loss = -(probs * g.detach()).sum() / n + self.q_coef * q_loss
@@ -515,7 +520,7 @@ class ACER(BaseAlgorithm):
             for _ in range(n_replay):
                 segment = self.replay_buffer.sample(rng)
                 obs = self._segment_obs(segment)[:segment.actions.size]
-                batches.append((segment, th.softmax(policy.average_logits(obs), dim=-1)))
+                batches.append((segment, self._average_probs(policy, obs)))
         return batches
 
     def _record_train(self, stats: dict[str, float]) -> None:
