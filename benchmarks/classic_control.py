@@ -5,7 +5,7 @@ ACER against SB3's A2C, PPO and DQN on CartPole-v1 and Acrobot-v1, same step bud
     python benchmarks/classic_control.py report          # writes docs/benchmarks.md's classic-control part
     python benchmarks/classic_control.py throughput      # ACER's cost per env step against A2C and PPO
 
-Hyperparameters come from benchmarks/hyperparams/<algo>.yml (rl-zoo3's format); every algorithm runs
+Hyperparameters come from sb3_disagree/hyperparams/<algo>.yml (rl-zoo3's format); every algorithm runs
 for the same budget per env (BUDGETS) whatever its file says. Each run evaluates the deterministic
 policy every `--eval-freq` steps over 20 episodes and writes one JSON file under benchmarks/results/.
 """
@@ -23,6 +23,7 @@ import numpy as np
 import yaml
 from docs_section import write_section
 
+from sb3_disagree.rl_zoo import HYPERPARAMS
 from sb3_disagree.run.logs import silent_logger
 
 ROOT = Path(__file__).resolve().parent
@@ -36,7 +37,7 @@ def load_hyperparams(algo: str, env_id: str) -> dict[str, Any]:
     """Read rl-zoo3-style hyperparameters and turn them into constructor kwargs."""
     from stable_baselines3.common.utils import LinearSchedule
 
-    with open(ROOT / "hyperparams" / f"{algo}.yml") as f:
+    with open(HYPERPARAMS / f"{algo}.yml") as f:
         params = dict(yaml.safe_load(f)[env_id])
     kwargs: dict[str, Any] = {}
     for key, value in params.items():
@@ -161,7 +162,7 @@ def cmd_report(args: argparse.Namespace) -> None:
         "Thresholds: CartPole-v1 475, Acrobot-v1 -100, reached when the mean return of 20 deterministic evaluation "
         f"episodes (every {args.eval_freq // 1000}k steps) reaches it. Final return: the last evaluation. "
         "env steps/s: training wall-clock, evaluation time excluded. Hyperparameters: "
-        "`benchmarks/hyperparams/<algo>.yml`.\n\n"
+        "`sb3_disagree/hyperparams/<algo>.yml`.\n\n"
         f"{table}\n"
     )
     write_section("classic-control", "ACER against A2C, PPO and DQN on classic control", body)
@@ -190,7 +191,7 @@ def cmd_throughput(args: argparse.Namespace) -> None:
                         f"{1e6 * seconds / args.steps:.0f} |")
             print(rows[-1], flush=True)
     body = (f"Command: `python benchmarks/classic_control.py throughput --steps {args.steps}`: each algorithm with its "
-            "tuned hyperparameters (`benchmarks/hyperparams/`), one torch thread, one after another in one process, "
+            "tuned hyperparameters (`sb3_disagree/hyperparams/`), one torch thread, one after another in one process, "
             f"{args.steps} env steps after a 2 000-step warm-up, learning included.\n\n"
             "| env | algorithm | n_envs | env steps/s | microseconds per env step |\n|---|---|---|---|---|\n"
             + "\n".join(rows) + "\n")

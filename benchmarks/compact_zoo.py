@@ -6,7 +6,7 @@ Each ``model.zip`` keeps every member byte for byte except ``policy.pth``, which
 follows. Before a file is replaced, the new bytes loaded by ``ACER.load`` must give the original tensors, entry
 for entry, so the policies that load are the same.
 
-    python benchmarks/compact_zoo.py sb3_disagree/data/zoo sb3_disagree/data/zoo-greedy
+    python benchmarks/compact_zoo.py zoo/default zoo/greedy
 """
 
 import argparse

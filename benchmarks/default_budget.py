@@ -13,6 +13,7 @@ to end and its saved model evaluated alone both ways. Compact results go to benc
     python benchmarks/default_budget.py curve NAME OUT/G-S [...]  # training success curves into NAME/curves.csv, and
         # where each goal's mean curve first reaches 90%
     python benchmarks/default_budget.py keep NAME OUT/G-S [...]   # copy the compact results into NAME/
+    python benchmarks/default_budget.py plot NAME OUT.png          # NAME's kept curves, each goal's mean thick
 """
 
 import argparse
@@ -140,6 +141,37 @@ def curve(name: str, folders: list[Path], steps: int = 100_000, points: int = 50
               f"{'never' if reached is None else f'{reached / 1000:.0f}k'} env steps")
 
 
+def plot(name: str, out: Path) -> None:
+    """The kept training curves of ``RESULTS/NAME/curves.csv``: each run thin, each goal's mean thick, one colour a goal,
+    and each run's saved policy alone (its ``eval.txt``) in the legend."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import pandas as pd
+
+    data = pd.read_csv(RESULTS / name / "curves.csv")
+    fig, ax = plt.subplots(figsize=(7, 4), dpi=110)
+    for goal, color in zip(dict.fromkeys(c.rsplit("-", 1)[0] for c in data.columns[1:]), ("#1f4fd6", "#d62728")):
+        runs = [c for c in data.columns[1:] if c.rsplit("-", 1)[0] == goal]
+        alone = [_row(RESULTS / name / run) for run in runs]
+        for run in runs:
+            ax.plot(data.env_steps, data[run], color=color, lw=0.7, alpha=0.4)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)
+            mean = np.nanmean(data[runs].to_numpy(), axis=1)
+        ax.plot(data.env_steps, mean, color=color, lw=2.2,
+                label=f"{goal}: mean of {len(runs)}; alone {np.mean([r['greedy'] for r in alone]):.2f} greedy, "
+                      f"{np.mean([r['sampled'] for r in alone]):.2f} sampled")
+    ax.axhline(0.9, color="grey", ls=":", lw=1)
+    ax.set(xlabel="env steps", ylabel="training success (last 50 episodes)", ylim=(0, 1.02),
+           title=f"dopt train's default ({name}), five runs a task")
+    ax.legend(loc="lower right", fontsize=8)
+    fig.tight_layout()
+    fig.savefig(out)
+    print(f"wrote {out}")
+
+
 def keep(name: str, folders: list[Path]) -> None:
     for folder in folders:
         dest = RESULTS / name / folder.name
@@ -174,6 +206,9 @@ if __name__ == "__main__":
     p = sub.add_parser("keep")
     p.add_argument("name")
     p.add_argument("folders", type=Path, nargs="+")
+    p = sub.add_parser("plot")
+    p.add_argument("name")
+    p.add_argument("out", type=Path)
     args = parser.parse_args()
     if args.command == "run":
         run(args.out, args.seeds, args.goals, args.steps, args.replay_ratio, args.like, args.features_dtype,
@@ -184,5 +219,7 @@ if __name__ == "__main__":
         table(args.folders)
     elif args.command == "curve":
         curve(args.name, args.folders)
+    elif args.command == "plot":
+        plot(args.name, args.out)
     else:
         keep(args.name, args.folders)

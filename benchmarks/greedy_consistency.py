@@ -2,7 +2,7 @@
 The greedy-consistency phase on an experiment cell's finished runs: each seed's model refined
 (``sb3_disagree.run.consistency.refine_run``, written to ``seed-S/consistent/``) and a table of the policy alone
 before (the run's result.json) and after, greedy and sampled, 100 episodes each from the run's final-evaluation
-env seeds (docs/results.md, "Greedy consistency").
+env seeds (9b0ec2d:docs/results.md, "Greedy consistency").
 
     python benchmarks/greedy_consistency.py benchmarks/results/experiments/alone-bathtub/kickstart-rs1-ema-overlap \
         --seeds 0,1,2,3,4 [--rounds 3] [--steps 20000] [--name consistent] [--force] [--threads 1]

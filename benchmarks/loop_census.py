@@ -2,7 +2,7 @@
 Where a saved policy's greedy failures go: run it alone (SB3's ``predict``, greedy, its memory carried by ``state``)
 and, for each episode that fails, count the steps whose frame was already seen in the episode (an exact loop, which
 the greedy-consistency phase samples its way out of) and the distinct frames of its last 60 steps (1: pressed
-against a wall; 2: turning back and forth), with the actions it took (docs/results.md, "The greedy zoo").
+against a wall; 2: turning back and forth), with the actions it took (9b0ec2d:docs/results.md, "The greedy zoo").
 
     python benchmarks/loop_census.py ZOO/sb3_disagree__Office-v0/sofa/model.zip --env sb3_disagree/Office-v0 \\
         --goal sofa [--episodes 40] [--seed 10000] [--sampled]

@@ -1,7 +1,7 @@
 """
 The greedy-consistency phase on a copy of a shipped apartment prior (the zoo is not touched): 3 rounds of 20k env
 steps from env seed 30 000, then the refined prior alone over 300 episodes greedy and sampled from its card's env
-seeds (10 000+); docs/results.md, "Greedy consistency after training". The refined model and its numbers go to
+seeds (10 000+); 9b0ec2d:docs/results.md, "Greedy consistency after training". The refined model and its numbers go to
 OUT (default: prior-consistency/ in the current folder).
 
     python benchmarks/prior_consistency.py shower [--rounds 3] [--zoo ZOO] [--out prior-consistency]

@@ -3,7 +3,7 @@ Small grid search for ACER's hyperparameters on one env; prints steps to thresho
 
     python benchmarks/tune_acer.py --env CartPole-v1 --seeds 0 1 2 --grid '{"learning_rate": [7e-4, 1e-3]}'
 
-Each configuration starts from benchmarks/hyperparams/acer.yml and overrides the grid's keys.
+Each configuration starts from sb3_disagree/hyperparams/acer.yml and overrides the grid's keys.
 """
 
 import argparse

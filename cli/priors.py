@@ -122,8 +122,8 @@ def show(goal: str, env: str = ENV_OPT, zoo: Optional[Path] = ZOO_OPT) -> None:
 @app.command()
 def add(
     model: Path = typer.Argument(..., help="An SB3 model file (ACER, PPO, A2C, TRPO, MaskablePPO)."),
-    goal: Optional[str] = typer.Option(None, "--goal", help="The goal it reaches [default: the goal on the model "
-                                       "card (README.md) beside the model]."),
+    goal: Optional[str] = typer.Option(None, "--goal", help="The goal it reaches (default: the goal on the model "
+                                       "card (README.md) beside the model)."),
     env: str = ENV_OPT,
     episodes: int = typer.Option(100, "--episodes", help="Evaluation episodes for the card (0: none)."),
     replace: bool = typer.Option(False, "--replace", help="Replace an existing prior for this goal."),
@@ -158,7 +158,7 @@ def eval_prior(
     goal: str,
     episodes: int = typer.Option(100, "--episodes"),
     deterministic: Optional[bool] = typer.Option(None, "--deterministic/--stochastic", help="Only greedy or only "
-                                                 "sampled actions [default: both, side by side]."),
+                                                 "sampled actions (default: both, side by side)."),
     seed: int = typer.Option(CARD_SEED, "--seed", help="Seed of the first env; the card's episodes start at 10000."),
     record: bool = typer.Option(False, "--record", help="Write the evaluations on the prior's card."),
     env: str = ENV_OPT,

@@ -100,7 +100,7 @@ def _cli_only(card_episodes: int = 20, progress_every: float = 30.0, reward_scal
         (docs/acer.md, item 22)
     :param features_dtype: "bfloat16": the CNN's passes in ACER's updates run in bfloat16 (faster on CPUs with
         bfloat16 instructions); heads, losses, acting and the saved weights stay float32 ("float32", the
-        default: all float32; docs/results.md, "bfloat16 features")
+        default: all float32; 9b0ec2d:docs/results.md, "bfloat16 features")
     :param average_ahead: With the overlapped loop, the trust region's reference for the replay updates is computed
         by the rollout thread before it hands them over (faster on two cores; the reference up to ceil(replay_ratio)
         updates older; docs/acer.md, item 24). Default: on for a new --mode kickstart run with the overlapped loop,
@@ -276,41 +276,60 @@ def _show_end(run_dir: Path, model, finished: bool, goal: str) -> None:
 
 def eval_run(
     run_or_model: Path = typer.Argument(..., help="A run folder or a model.zip."),
-    episodes: int = typer.Option(100, "--episodes"),
+    episodes: int = typer.Option(100, "--episodes", min=1),
     deterministic: Optional[bool] = typer.Option(None, "--deterministic/--stochastic", help="Only greedy or only "
-                                                 "sampled actions [default: both, side by side]."),
-    seed: Optional[int] = typer.Option(None, "--seed", help="Env seed of the first evaluation env [default: the "
-                                       "run's seed + 20000, as the run's own final evaluation]."),
-    trajectory: Optional[Path] = typer.Option(None, "--trajectory", help="Draw the run's recorded episodes (PNG)."),
-    episode: int = typer.Option(-1, "--episode", help="Which recorded episode to draw (-1: the last)."),
+                                                 "sampled actions (default: both, side by side; greedy for "
+                                                 "--video and --trajectory)."),
+    seed: Optional[int] = typer.Option(None, "--seed", min=0, help="Env seed of the first evaluation env "
+                                       "(default: the run's seed + 20000, as the run's own final evaluation)."),
+    video: Optional[Path] = typer.Option(None, "--video", help="Record the policy alone in episodes of its own: "
+                                         "the agent's view beside the map (.gif or .mp4)."),
+    video_episodes: int = typer.Option(3, "--video-episodes", min=1, help="Episodes the video records."),
+    trajectory: Optional[Path] = typer.Option(None, "--trajectory", help="Draw an episode of the policy alone on "
+                                              "the map (PNG)."),
+    episode: int = typer.Option(1, "--episode", min=1, help="Which of its episodes --trajectory draws."),
 ) -> None:
-    """Evaluate the new policy alone (no priors): success rate, episode length, return."""
+    """Evaluate the new policy alone (no priors): success rate, episode length, return; watch it with --video."""
     with clean_errors():
-        from sb3_disagree.run import evaluate_run
+        from sb3_disagree.run import evaluate_both, load_run
+        from sb3_disagree.run.video import VIDEO_FORMATS
 
+        if video is not None and video.suffix not in VIDEO_FORMATS:
+            raise ValueError(f"--video {video}: give a file ending in {' or '.join(VIDEO_FORMATS)}")
+        for target in (video, trajectory):
+            if target is not None and not target.parent.is_dir():
+                raise ValueError(f"{target}: the folder {target.parent} does not exist")
         labels = ("greedy", "sampled") if deterministic is None else ("greedy" if deterministic else "sampled",)
-        config, results = evaluate_run(run_or_model, episodes, seed, labels)
+        config, model = load_run(run_or_model)
+        results = evaluate_both(model, config, episodes, seed, labels)
         for label, result in results.items():
             console.print(f"{config['goal']}: success {result.success_rate:.2f}, mean length {result.mean_length:.1f}, "
                           f"mean return {result.mean_return:.2f} over {episodes} episodes ({label} actions, no priors)")
+        greedy = deterministic is None or deterministic
+        if video is not None:
+            _video(model, config, video, video_episodes, greedy, seed)
         if trajectory is not None:
-            _draw(run_or_model if run_or_model.is_dir() else run_or_model.parent, config, trajectory, episode)
+            _draw(model, config, trajectory, episode, greedy, seed)
 
 
-def _draw(run_dir: Path, config: dict, out: Path, episode: int) -> None:
-    from sb3_disagree.run import draw_episode, read_episodes
+def _video(model, config: dict, out: Path, episodes: int, greedy: bool, seed: Optional[int]) -> None:
+    from sb3_disagree.run.video import play, write_video
 
-    records = read_episodes(run_dir)
-    if not records:
-        raise FileNotFoundError(f"{run_dir} has no recorded episodes (trajectories.jsonl): train with "
-                                "--record-trajectories to record them")
-    if not -len(records) <= episode < len(records):
-        raise ValueError(f"--episode {episode}: the run recorded {len(records)} episodes")
-    record = records[episode]
-    draw_episode(record, config["env_id"], config["goal"], out=out)
-    tags = record["tags"][1:]
-    console.print(f"wrote {out}: the episode at {record['timesteps']:,} steps, "
-                  f"{'success' if record['success'] else 'no success'}, {tags.count('prior')} of {len(tags)} steps on priors")
+    played = play(model, config, episodes, greedy, seed, frames=True)
+    frames = write_video(played, out)
+    console.print(f"wrote {out}: {frames} frames of {episodes} episodes ({'greedy' if greedy else 'sampled'}), "
+                  f"{sum(e.success for e in played)} reached the goal")
+
+
+def _draw(model, config: dict, out: Path, episode: int, greedy: bool, seed: Optional[int]) -> None:
+    from sb3_disagree.run.video import draw_played, play
+
+    played = play(model, config, episode, greedy, seed)[-1]
+    how = "greedy" if greedy else "sampled"
+    outcome = "reached the goal" if played.success else "did not reach the goal"
+    draw_played(played, config["env_id"], config["goal"], f"{config['goal']}: episode {episode}, {how}, {outcome} "
+                f"in {played.length} steps", out)
+    console.print(f"wrote {out}: episode {episode} of the policy alone ({how}), {outcome} in {played.length} steps")
 
 
 def consistency(

@@ -11,6 +11,7 @@ from typing import Any, Optional
 import yaml
 
 CARD_NAME = "README.md"
+LICENSE = "mit"  # the package's licence, which a trained model's card carries unless its owner names another
 
 
 def _metric(name: str, value: float, kind: str) -> dict[str, Any]:
@@ -18,7 +19,7 @@ def _metric(name: str, value: float, kind: str) -> dict[str, Any]:
 
 
 def model_card(config: dict[str, Any], algorithm: str, evaluations: Optional[dict[str, Any]] = None,
-               command: str = "") -> str:
+               command: str = "", license: str = LICENSE) -> str:
     """
     The card's text.
 
@@ -26,6 +27,7 @@ def model_card(config: dict[str, Any], algorithm: str, evaluations: Optional[dic
     :param algorithm: The algorithm's name (``ACER``, ``PPO``)
     :param evaluations: ``{"greedy": Evaluation, "sampled": Evaluation}`` of the policy alone, or None
     :param command: The command that trained it
+    :param license: The model's licence, as the Hugging Face card's ``license`` field
     """
     env_id, goal = config["env_id"], config["goal"]
     metrics = []
@@ -36,6 +38,7 @@ def model_card(config: dict[str, Any], algorithm: str, evaluations: Optional[dic
               for p, s in zip(config.get("chosen_priors") or [], config.get("similarities") or [])]
     header = {
         "library_name": "stable-baselines3",
+        "license": license,
         "tags": [env_id, "deep-reinforcement-learning", "reinforcement-learning", "stable-baselines3", "sb3-disagree"],
         "model-index": [{"name": algorithm, "results": [{
             "task": {"type": "reinforcement-learning", "name": "reinforcement-learning"},
@@ -56,11 +59,15 @@ def model_card(config: dict[str, Any], algorithm: str, evaluations: Optional[dic
                   for label, r in evaluations.items()]
         lines.append("")
     loader = "from sb3_disagree import ACER" if algorithm == "ACER" else f"from stable_baselines3 import {algorithm}"
-    lines += ["## Usage", "", "```python", "import gymnasium as gym", "import sb3_disagree  # registers the envs",
+    lines += ["## Usage", "", "```python", "import sb3_disagree  # registers the envs",
+              "from stable_baselines3.common.env_util import make_vec_env",
               "from stable_baselines3.common.evaluation import evaluate_policy", loader, "",
               f"model = {algorithm}.load(\"model.zip\")",
-              f"env = gym.make(\"{env_id}\", goal=\"{goal}\")",
-              "print(evaluate_policy(model, env, n_eval_episodes=100))", "```", ""]
+              f"env = make_vec_env(\"{env_id}\", n_envs=4, seed=777, env_kwargs=dict(goal=\"{goal}\"))",
+              "successes = []", "",
+              "def count(local, _):", "    if local[\"done\"]:", "        successes.append(local[\"info\"][\"is_success\"])",
+              "", "evaluate_policy(model, env, n_eval_episodes=100, callback=count)",
+              "print(f\"success {sum(successes) / len(successes):.2f}\")", "```", ""]
     if command:
         lines += ["## Training", "", f"`{command}`", ""]
     return "---\n" + yaml.safe_dump(header, sort_keys=False) + "---\n\n" + "\n".join(lines)

@@ -2,19 +2,22 @@
 ACER in rl-zoo3 (optional extra ``pip install sb3-disagree[zoo]``). rl-zoo3 has no plugin API; its way for an
 outside algorithm is an entry in ``rl_zoo3.ALGOS`` (and, for ``--optimize``, a sampler in
 ``rl_zoo3.hyperparams_opt.HYPERPARAMS_SAMPLER``) before its ``train`` runs. This module does both, then hands
-over to rl-zoo3's own command line::
+over to rl-zoo3's own command line, with the package's own ``hyperparams/acer.yml`` unless ``--conf-file`` names
+another::
 
-    python -m sb3_disagree.rl_zoo --algo acer --env CartPole-v1 --conf-file benchmarks/hyperparams/acer.yml
-    python -m sb3_disagree.rl_zoo --algo acer --env CartPole-v1 --conf-file benchmarks/hyperparams/acer.yml \\
-        --optimize --n-trials 20 --n-timesteps 20000
+    python -m sb3_disagree.rl_zoo --algo acer --env CartPole-v1
+    python -m sb3_disagree.rl_zoo --algo acer --env CartPole-v1 --optimize --n-trials 20 --n-timesteps 20000
 """
 
+import sys
+from pathlib import Path
 from typing import Any
 
 from torch import nn
 
 from sb3_disagree.acer import ACER
 
+HYPERPARAMS = Path(__file__).resolve().parent / "hyperparams"  # rl-zoo3's format: env id -> settings
 NET_ARCH = {"small": dict(pi=[64, 64], qf=[64, 64]), "medium": dict(pi=[256, 256], qf=[256, 256])}
 ACTIVATION = {"tanh": nn.Tanh, "relu": nn.ReLU}
 
@@ -70,6 +73,9 @@ def main() -> None:
 
     register()
     from rl_zoo3.train import train
+
+    if "--conf-file" not in sys.argv and "-conf" not in sys.argv:
+        sys.argv += ["--conf-file", str(HYPERPARAMS / "acer.yml")]
 
     train()
 

@@ -28,16 +28,27 @@ def test_the_wheel_works_alone_from_another_folder(tmp_path):
     """Build the wheel, install it (no dependencies) into a fresh venv that sees this environment's packages,
     and run the main commands from a folder with no repository: zoo, scenes and grids come from the wheel."""
     import os
+    import re
     import site
     import sysconfig
     from pathlib import Path
 
+    from readme import block_with
+
     repo = Path(__file__).resolve().parents[1]
     dist = tmp_path / "dist"
+    # The README's two commands: the wheel built here without isolation (this environment's setuptools), then
+    # installed without its dependencies (torch first, as the README says; this environment has them).
+    make_wheel, install_both = block_with("pip wheel")
+    assert make_wheel == "pip wheel --no-deps -w dist ."
+    torch_first, install_wheel = install_both.split(" && ")
+    assert torch_first == "pip install " + re.search(r"^TORCH\s*\?=\s*(\S+)", (repo / "Makefile").read_text(), re.M)[1]
+    assert install_wheel == "pip install dist/sb3_disagree-*.whl"
     # Nothing of this process's own path may leak into the commands (the wheel's copy must be what imports).
     env = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}
-    build = subprocess.run([sys.executable, "-m", "pip", "wheel", "--no-deps", "--no-build-isolation", "-q", "-w",
-                            str(dist), str(repo)], capture_output=True, text=True, timeout=300, env=env)
+    pip_wheel = [str(dist) if t == "dist" else str(repo) if t == "." else t for t in make_wheel.split()]
+    build = subprocess.run([sys.executable, "-m", *pip_wheel, "--no-build-isolation", "-q"], capture_output=True,
+                           text=True, timeout=300, env=env)
     assert build.returncode == 0, build.stderr
     (wheel,) = dist.glob("sb3_disagree-*.whl")
     assert wheel.stat().st_size < 60e6
@@ -66,6 +77,8 @@ def test_the_wheel_works_alone_from_another_folder(tmp_path):
     assert "chosen" in run(dopt, "priors", "list", "--goal", "bathtub")
     assert "3+flags" in run(dopt, "priors", "list", "--zoo", "greedy", "--goal", "bathtub")  # shipped beside it
     assert "fig3-bathtub" in run(dopt, "experiment", "list")
+    assert "CartPole-v1" in run(str(python), "-c", "from sb3_disagree.rl_zoo import HYPERPARAMS; "
+                                                   "print((HYPERPARAMS / 'acer.yml').read_text())")
     out = run(dopt, "train", "--goal", "bathtub", "--steps", "2000", "--card-episodes", "1")  # the RGB apartment
     assert "done: 2,000 steps" in " ".join(out.split())
     assert (work / "runs" / "sb3_disagree__Apartment-v0" / "bathtub" / "kickstart-0" / "README.md").exists()
@@ -76,14 +89,15 @@ def test_the_wheel_works_alone_from_another_folder(tmp_path):
 def test_acer_trains_and_tunes_through_rl_zoo3(tmp_path):
     """rl-zoo3's own train with the project's hyperparameter file, then a 2-trial optimisation."""
     import csv
-    from pathlib import Path
 
     import pytest
 
+    from readme import block_with
+
     pytest.importorskip("rl_zoo3")
-    conf = str(Path(__file__).resolve().parents[1] / "benchmarks" / "hyperparams" / "acer.yml")
-    common = [sys.executable, "-m", "sb3_disagree.rl_zoo", "--algo", "acer", "--env", "CartPole-v1", "--conf-file",
-              conf, "--seed", "0"]
+    # The README's command, no --conf-file: the package's own hyperparams/acer.yml (as from a wheel).
+    (command,) = block_with("python -m sb3_disagree.rl_zoo")
+    common = [sys.executable, *command.split()[1:], "--seed", "0"]
     result = subprocess.run([*common, "-n", "2000", "-f", str(tmp_path / "train"), "--eval-freq", "-1"],
                             capture_output=True, text=True, timeout=300, cwd=tmp_path)
     assert result.returncode == 0, result.stderr[-3000:]

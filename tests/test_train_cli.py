@@ -219,20 +219,38 @@ def test_overlap_trains_evaluates_and_resumes(zoo, tmp_path):
     assert cfg["finished"] and cfg["overlap"] is True and ACER.load(run / "model.zip").num_timesteps >= 600
 
 
-def test_eval_and_trajectory_picture(zoo, tmp_path):
-    assert runner.invoke(app, _train_args(zoo, tmp_path)).exit_code == 0
+def test_eval_draws_and_records_the_policy_alone(zoo, tmp_path):
+    """--trajectory and --video show the evaluated policy's own episodes (no recorded training episode needed)."""
+    from PIL import Image
+
+    from sb3_disagree.run import load_run
+    from sb3_disagree.run.video import play, write_video
+
+    assert runner.invoke(app, _train_args(zoo, tmp_path, "--card-episodes", "0")).exit_code == 0
     run = tmp_path / "sb3_disagree__ApartmentState-v0" / "bathtub" / "disagreement-0"
-    png = tmp_path / "traj.png"
-    # Episodes are recorded only when asked.
+    saved = yaml.safe_load((run / "config.yaml").read_text())
+    saved["env_kwargs"] = {"max_episode_steps": 12}  # short episodes: an untrained policy rarely ends one sooner
+    (run / "config.yaml").write_text(yaml.safe_dump(saved))
+    png, gif, mp4 = tmp_path / "path.png", tmp_path / "agent.gif", tmp_path / "agent.mp4"
     assert not (run / "trajectories.jsonl").exists()
-    result = runner.invoke(app, ["eval", str(run), "--episodes", "3", "--trajectory", str(png)])
-    assert result.exit_code == 2 and "--record-trajectories" in result.output
-    assert runner.invoke(app, _train_args(zoo, tmp_path, "--record-trajectories", "--force")).exit_code == 0
-    result = runner.invoke(app, ["eval", str(run), "--episodes", "3", "--trajectory", str(png)])
+    result = runner.invoke(app, ["eval", str(run), "--episodes", "3", "--trajectory", str(png), "--episode", "2",
+                                 "--video", str(gif), "--video-episodes", "2"])
     assert result.exit_code == 0, result.output
     assert "over 3 episodes" in result.output and png.stat().st_size > 10_000
+    assert "episode 2 of the policy alone (greedy)" in result.output
+    # One frame per observation: each episode's first, then one per step; the GIF holds every one of them.
+    config, model = load_run(run)
+    played = play(model, config, episodes=2, frames=True)
+    expected = sum(e.length + 1 for e in played)
+    assert all(1 <= e.length <= 12 for e in played) and expected == sum(len(e.frames) for e in played)
+    assert f"{expected} frames of 2 episodes" in " ".join(result.output.split())
+    with Image.open(gif) as image:
+        assert image.n_frames == expected and image.size == (played[0].frames[0].shape[1], played[0].frames[0].shape[0])
+    assert write_video(played, mp4) == expected and mp4.stat().st_size > 1_000
+    result = runner.invoke(app, ["eval", str(run), "--episodes", "2", "--video", str(tmp_path / "agent.avi")])
+    assert result.exit_code == 2 and ".gif or .mp4" in result.output
     result = runner.invoke(app, ["eval", str(run / "model.zip"), "--episodes", "2", "--stochastic"])
-    assert result.exit_code == 0, result.output
+    assert result.exit_code == 0 and "sampled actions" in result.output and "greedy actions" not in result.output
 
 
 class StopAt(BaseCallback):
@@ -347,7 +365,7 @@ def test_the_ppo_modes_settings_are_the_published_hyperparameters_file():
 
     from sb3_disagree.run import PPO_KWARGS
 
-    published = yaml.safe_load((Path(__file__).parents[1] / "benchmarks/hyperparams/ppo.yml").read_text())
+    published = yaml.safe_load((Path(__file__).parents[1] / "sb3_disagree/hyperparams/ppo.yml").read_text())
     entry = dict(published["sb3_disagree/Apartment-v0"])
     assert entry.pop("n_envs") == RunConfig(goal="x").n_envs and entry.pop("policy") == "CnnPolicy"
     entry.pop("n_timesteps")
@@ -372,7 +390,17 @@ def test_a_model_card_beside_the_model_and_priors_add_reads_it(zoo, tmp_path):
     assert result.exit_code == 0, result.output
     run = tmp_path / "sb3_disagree__ApartmentState-v0" / "bathtub" / "disagreement-0"
     header = read_model_card(run / "README.md")
-    assert header["library_name"] == "stable-baselines3" and STATE_ID in header["tags"]
+    assert header["library_name"] == "stable-baselines3" and STATE_ID in header["tags"] and header["license"] == "mit"
+    # The card's usage block runs as written (fewer episodes), prints success, and SB3 warns of nothing.
+    text = (run / "README.md").read_text()
+    usage = text.split("```python\n")[1].split("```")[0].replace("n_eval_episodes=100", "n_eval_episodes=2")
+    import subprocess
+    import sys
+
+    done = subprocess.run([sys.executable, "-W", "always", "-c", usage], cwd=run, capture_output=True, text=True,
+                          timeout=300)
+    assert done.returncode == 0 and done.stdout.startswith("success "), done.stderr[-2000:]
+    assert "Warning" not in done.stderr, done.stderr[-2000:]
     metrics = {m["name"]: m["value"] for m in header["model-index"][0]["results"][0]["metrics"]}
     assert set(metrics) == {"success_rate (greedy)", "mean_reward (greedy)", "success_rate (sampled)",
                             "mean_reward (sampled)"}

@@ -182,6 +182,12 @@ class ApartmentEnv(NavigationEnv):
 
         return draw_trajectory(self.layout, self.path, goal=self.goal.name, background=self._top_view())
 
+    def first_person(self, pose: Optional[tuple[float, float, float]] = None) -> np.ndarray:
+        """The agent's view, uint8 (H, W, 3), whatever the observations are (for videos): from ``pose`` (x, z,
+        heading), by default the agent's own."""
+        pose = pose or (self.x, self.z, self.heading)
+        return self.renderer.egocentric(*pose)
+
     def _top_view(self) -> Optional[np.ndarray]:
         return self.renderer.top_view() if self.obs_mode == "rgb" else None
 

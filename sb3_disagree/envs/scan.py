@@ -200,10 +200,16 @@ class ScanEnv(NavigationEnv):
         x, z = self.field.point(int(i), int(j))
         return x, z, self.np_random.uniform(-math.pi, math.pi)
 
+    def first_person(self, pose: Optional[tuple[float, float, float]] = None) -> np.ndarray:
+        """The agent's view, uint8 (H, W, 3), whatever the observations are (for videos): from ``pose`` (x, z,
+        heading), by default the agent's own."""
+        pose = pose or (self.x, self.z, self.heading)
+        return self.renderer.render(*pose)
+
     def render(self) -> Optional[np.ndarray]:
         if self.render_mode != "rgb_array":
             return None
-        return self.renderer.render(self.x, self.z, self.heading)
+        return self.first_person()
 
     def close(self) -> None:
         if self._renderer is not None:

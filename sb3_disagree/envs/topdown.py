@@ -80,6 +80,8 @@ def draw_trajectory(
     goal: Optional[str] = None,
     background: Optional[np.ndarray] = None,
     out: Optional[Union[str, Path]] = None,
+    title: Optional[str] = None,
+    legend: bool = False,
 ) -> np.ndarray:
     """
     Draw a path on the map: segment t (from position t to t+1) in the colour of tag t (green where
@@ -91,6 +93,8 @@ def draw_trajectory(
     :param goal: Goal object to mark with a star
     :param background: MiniWorld's top view to draw on; a schematic map if None
     :param out: PNG file to write, if given
+    :param title: Written at the top of the picture
+    :param legend: Say what the colours and marks are
     :return: The picture, uint8 (600, 800, 3)
     """
     fig, ax = _figure(layout, background, goal)
@@ -103,6 +107,19 @@ def draw_trajectory(
         ax.add_collection(LineCollection(segs, colors=colors, linewidths=2.5))
     if len(pts):
         ax.plot(pts[0, 0], pts[0, 1], "o", color="black", markersize=7)
+    if title is not None:
+        ax.text(0.5, 0.98, title, transform=ax.transAxes, ha="center", va="top", fontsize=12,
+                bbox=dict(boxstyle="round,pad=0.3", fc="white", ec="none", alpha=0.85))
+    if legend:
+        from matplotlib.lines import Line2D
+
+        lines = ([Line2D([], [], color=c, lw=2.5, label=f"{t} step") for t, c in TAG_COLORS.items()] if tags is not None
+                 else [Line2D([], [], color=DEFAULT_PATH_COLOR, lw=2.5, label="path")])
+        marks = [Line2D([], [], marker="o", color="black", ls="", label="start")]
+        if goal is not None:
+            marks.append(Line2D([], [], marker="*", color="#ff2d2d", markeredgecolor="black", markersize=14, ls="",
+                                label=f"goal: {goal}"))
+        ax.legend(handles=lines + marks, loc="lower right", framealpha=0.9)
     fig.canvas.draw()
     image = np.asarray(fig.canvas.buffer_rgba())[..., :3].copy()
     if out is not None:
@@ -111,3 +128,32 @@ def draw_trajectory(
 
     plt.close(fig)
     return image
+
+
+def map_image(env) -> tuple[np.ndarray, tuple[float, float, float, float]]:
+    """
+    The map of a navigation env with its goal marked, and where it lies: pixel (u, v) of the picture (W, H) shows
+    x = min_x + u / W * (max_x - min_x) and z = min_z + v / H * (max_z - min_z).
+
+    :param env: An apartment (drawn schematically) or a scan (its navigable grid), unwrapped or not
+    :return: The picture, uint8 (H, W, 3), and (min_x, max_x, min_z, max_z)
+    """
+    env = env.unwrapped
+    if hasattr(env, "layout"):
+        import matplotlib.pyplot as plt
+
+        fig, _ = _figure(env.layout, None, env.goal.name)
+        fig.canvas.draw()
+        image = np.asarray(fig.canvas.buffer_rgba())[..., :3].copy()
+        plt.close(fig)
+        return image, map_extent(env.layout)
+    grid = env.grid
+    image = np.full(grid.free.shape + (3,), 255, dtype=np.uint8)
+    image[grid.floor] = 204
+    image[grid.free] = 255
+    image[grid.obstacle] = 64
+    gi, gj = (min(max(k, 0), n - 1) for k, n in zip(grid.index(*env.goal_xz), grid.free.shape))
+    image[max(gi - 2, 0):gi + 3, max(gj - 2, 0):gj + 3] = (255, 45, 45)
+    extent = (grid.x0 - grid.cell / 2, grid.x0 + grid.cell * (grid.free.shape[0] - 0.5),
+              grid.z0 - grid.cell / 2, grid.z0 + grid.cell * (grid.free.shape[1] - 0.5))
+    return image.transpose(1, 0, 2).copy(), extent

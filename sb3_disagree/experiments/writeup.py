@@ -116,6 +116,19 @@ def acer_text(summaries: list) -> str:
     return flow(common) + (f"; the cells' own: {'; '.join(own)}" if own else "")
 
 
+def header_list(command: str, grid: str, seeds: str, steps: int, machine: str, note: str, acer: str,
+                more: str = "") -> str:
+    """A report's header: a short list (what ran, the seeds, the budget, the machine and what ran beside, ACER)."""
+    lines = [f"- Commands: {command}", f"- Grid: `{grid}`"]
+    lines += [f"- Seeds: {seeds}"] if "; " not in seeds else ["- Seeds:", *(f"  - {s}" for s in seeds.split("; "))]
+    lines += [f"- Budget: {steps:,} env steps per run", f"- Machine: {machine}"]
+    lines += [f"  - {part.strip()}" for part in note.split("; ") if part.strip()]
+    lines.append(f"- ACER: {acer}")
+    if more.strip():
+        lines.append(f"- {more.strip()}")
+    return "\n".join(lines)
+
+
 def _body(experiment: Experiment, grid, summaries: list, figure_link: str, note: str, command: str) -> str:
     name = experiment.name
     continued = ""
@@ -129,11 +142,11 @@ def _body(experiment: Experiment, grid, summaries: list, figure_link: str, note:
     if copied:
         continued += (f"Runs taken from another experiment (`same_as:` in the YAML; the same configuration and seed, "
                       f"and runs are deterministic): {', '.join(copied)}. ")
-    per_cell = {c.cell: sorted(c.seeds) for c in summaries}
-    if len({tuple(v) for v in per_cell.values()}) == 1:
-        seeds_text = f"Seeds {', '.join(map(str, next(iter(per_cell.values()))))}"
-    else:
-        seeds_text = "Seeds per cell: " + "; ".join(f"{k} {', '.join(map(str, v))}" for k, v in per_cell.items())
+    by_seeds: dict[str, list[str]] = {}
+    for c in summaries:
+        by_seeds.setdefault(", ".join(map(str, sorted(c.seeds))), []).append(c.cell)
+    seeds_text = (next(iter(by_seeds)) if len(by_seeds) == 1
+                  else "; ".join(f"{seeds} ({', '.join(cells)})" for seeds, cells in by_seeds.items()))
     run_cfg = summaries[0].records[0]["config"]
     alone_every = (f"{run_cfg.get('eval_episodes', 20)} episodes every {run_cfg.get('eval_every', 0) // 1000}k steps"
                    if run_cfg.get("eval_every") else "not evaluated along the way")
@@ -146,9 +159,9 @@ def _body(experiment: Experiment, grid, summaries: list, figure_link: str, note:
     if overlapped:
         how += (f" (the overlapped cells, {', '.join(overlapped)}: one run at a time, two torch threads for the on-policy "
                 "update and one in each of its two threads while the replay updates overlap the rollouts)")
-    body = (f"Commands: {command} (grid: `sb3_disagree/data/experiments/{name}.yaml`). "
-            f"{seeds_text}; {experiment.steps:,} env steps per run; {platform.machine()}, "
-            f"{os.cpu_count()} cores, {how}{'; ' + note if note else ''}. ACER: {acer_text(summaries)}. {continued}\n\n"
+    machine = f"{platform.machine()}, {os.cpu_count()} cores, {how}"
+    body = (header_list(command, f"sb3_disagree/data/experiments/{name}.yaml", seeds_text, experiment.steps, machine,
+                        note, acer_text(summaries), continued) + "\n\n"
             f"![{Path(figure_link).stem}]({figure_link})\n\n{table_markdown(experiment, summaries)}\n\n"
             "Solid lines: training success (the last 50 episodes over all envs, priors included where they were "
             "followed), mean over seeds with a 95% t-interval (none with fewer than 3 seeds); dashed: the new policy "

@@ -25,10 +25,13 @@ from sb3_disagree.files import write_atomic
 
 CARD = "card.json"
 MODEL = "model.zip"
-DEFAULT_ZOO = Path(__file__).resolve().parent.parent / "data" / "zoo"  # the shipped zoo, package data
+_PACKAGE = Path(__file__).resolve().parent.parent
+# The shipped zoos: the repository's zoo/ folder, which the wheel carries as the package's own zoo/.
+SHIPPED = _PACKAGE / "zoo" if (_PACKAGE / "zoo").is_dir() else _PACKAGE.parent / "zoo"
+DEFAULT_ZOO = SHIPPED / "default"
 # Zoos shipped beside it, by the name that --zoo accepts: "greedy", the priors made to work alone greedily (DAgger with
 # loop flags, then the greedy-consistency phase; docs/zoo.md).
-SHIPPED_ZOOS = {"greedy": DEFAULT_ZOO.parent / "zoo-greedy"}
+SHIPPED_ZOOS = {"greedy": SHIPPED / "greedy"}
 
 
 def zoo_root(root: Optional[Union[str, Path]] = None) -> Path:

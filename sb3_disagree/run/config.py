@@ -10,7 +10,7 @@ from sb3_disagree.options import MODES
 
 # Kickstarting's distillation: weight 1 on every state, falling linearly to 0 at 50k env steps.
 KICKSTART: dict[str, Any] = dict(distill_coef=1.0, distill_steps=50_000, distill_states="all")
-# SB3's PPO for the "ppo" mode: rl-zoo3's Atari settings with the runs' 4 envs (benchmarks/hyperparams/ppo.yml);
+# SB3's PPO for the "ppo" mode: rl-zoo3's Atari settings with the runs' 4 envs (sb3_disagree/hyperparams/ppo.yml);
 # learning rate and clip range fall linearly to 0 over the budget, as rl-zoo3's "lin_" values.
 PPO_KWARGS: dict[str, Any] = dict(n_steps=128, n_epochs=4, batch_size=256, learning_rate=2.5e-4, clip_range=0.1,
                                   ent_coef=0.01, vf_coef=0.5)
@@ -33,7 +33,7 @@ MODE_ACER_KWARGS: dict[str, dict[str, Any]] = {"kickstart": dict(reward_scale=1.
 DOPT_TRAIN_HARVEST = 30_000
 # dopt train's memory for a new kickstarting run on images: three frames, seen as the newest frame and two loop flags
 # (LoopFlagsCNN). Over five seeds a task at 100k, with the harvest, the policy alone went from 0.77
-# to 0.93 greedy on bathtub and from 0.61 to 0.86 on nightstand, sampled 1.00 and 0.99 (docs/results.md, "Loop flags").
+# to 0.93 greedy on bathtub and from 0.61 to 0.86 on nightstand, sampled 1.00 and 0.99 (9b0ec2d:docs/results.md, "Loop flags").
 DOPT_TRAIN_FRAME_STACK = 3
 # dopt train's consistency_validation for a new kickstarting run: the harvest's fit keeps, of its epochs, the one whose
 # greedy success over this many validation episodes is highest. One more epoch on the same labels moved a run's
