@@ -6,6 +6,7 @@ from pathlib import Path
 
 import click
 import typer
+import typer.testing
 
 from sb3_disagree.cli.app import app
 
@@ -68,4 +69,4 @@ def test_every_help_text_shows_whole():
     walk(typer.main.get_command(app), "dopt")
     assert not swallowed, swallowed
     result = typer.testing.CliRunner().invoke(app, ["eval", "--help"], terminal_width=100)
-    assert "default: both, side by side" in result.output
+    assert "(default: both, side by side;" in " ".join(result.output.replace("│", " ").split())

@@ -27,13 +27,12 @@ MODE_ACER_KWARGS: dict[str, dict[str, Any]] = {"kickstart": dict(reward_scale=1.
 # dopt train's consistency_harvest for kickstarting, its default mode: the last 30k training steps are a greedy phase
 # (the current weights' argmax, epsilon 0.2 of their samples) and model.zip is fitted to the loop-free paths of their
 # successful episodes (no env step more, 12-28 s of fitting). Over five seeds a task at 100k, with loop flags, the
-# policy alone reached 0.93 greedy on bathtub and 0.86 on nightstand with the harvest sampled from the moving average
-# (sessions 25-27), and 0.95 and 0.92 acted greedily by the current weights, sampled 1.00 and 0.99 (docs/results.md,
-# "The harvest by the current weights, acted greedily").
+# policy alone reached 0.93 greedy on bathtub and 0.86 on nightstand with the harvest sampled from the moving average,
+# and 0.95 and 0.92 acted greedily by the current weights, sampled 1.00 and 0.99 (docs/history.md).
 DOPT_TRAIN_HARVEST = 30_000
 # dopt train's memory for a new kickstarting run on images: three frames, seen as the newest frame and two loop flags
 # (LoopFlagsCNN). Over five seeds a task at 100k, with the harvest, the policy alone went from 0.77
-# to 0.93 greedy on bathtub and from 0.61 to 0.86 on nightstand, sampled 1.00 and 0.99 (9b0ec2d:docs/results.md, "Loop flags").
+# to 0.93 greedy on bathtub and from 0.61 to 0.86 on nightstand, sampled 1.00 and 0.99 (docs/history.md).
 DOPT_TRAIN_FRAME_STACK = 3
 # dopt train's consistency_validation for a new kickstarting run: the harvest's fit keeps, of its epochs, the one whose
 # greedy success over this many validation episodes is highest. One more epoch on the same labels moved a run's
