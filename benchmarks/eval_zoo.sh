@@ -6,5 +6,5 @@ set -euo pipefail
 goals=("$@")
 [ ${#goals[@]} -gt 0 ] || goals=(shower bathtub toilet bed wardrobe nightstand stove toaster microwave table)
 for goal in "${goals[@]}"; do
-  OMP_NUM_THREADS=1 dopt priors eval "$goal" --episodes 300 --record
+  OMP_NUM_THREADS=1 dopt priors eval "$goal" --episodes 300 --record --write-shipped
 done

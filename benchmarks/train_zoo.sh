@@ -5,5 +5,6 @@ set -euo pipefail
 goals=("$@")
 [ ${#goals[@]} -gt 0 ] || goals=(shower bathtub toilet bed wardrobe nightstand stove toaster microwave table)
 for goal in "${goals[@]}"; do
-  OMP_NUM_THREADS=1 dopt priors train --goal "$goal" --method dagger --rounds 5 --epochs 5 --seed 0 --replace
+  OMP_NUM_THREADS=1 dopt priors train --goal "$goal" --method dagger --rounds 5 --epochs 5 --seed 0 --replace \
+    --zoo zoo/default --write-shipped
 done

@@ -4,9 +4,11 @@ from typing import Optional
 
 import typer
 
+from sb3_disagree.cli.common import OneLineErrors
 from sb3_disagree.version import __version__
 
 app = typer.Typer(
+    cls=OneLineErrors,
     name="dopt",
     help="Disagreement Options: learn a new navigation goal by reusing the policies you already have.",
     no_args_is_help=True,
@@ -29,10 +31,9 @@ def _root(
     """Disagreement Options on Stable-Baselines3."""
 
 
-from sb3_disagree.cli import experiment as _experiment  # noqa: E402
-from sb3_disagree.cli import priors as _priors  # noqa: E402
-
-from sb3_disagree.cli import train as _train  # noqa: E402
+import sb3_disagree.cli.experiment as _experiment  # noqa: E402
+import sb3_disagree.cli.priors as _priors  # noqa: E402
+import sb3_disagree.cli.train as _train  # noqa: E402
 
 app.command("train")(_train.train)
 app.command("eval")(_train.eval_run)

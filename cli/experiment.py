@@ -53,7 +53,7 @@ def _cells(text: Optional[str]) -> Optional[list[str]]:
 def run(
     name: str = typer.Argument(..., help="A shipped experiment's name, or a YAML file."),
     backend: str = typer.Option("local", "--backend", help="local (a process pool) or ray."),
-    jobs: Optional[int] = typer.Option(None, "--jobs", help="Runs at a time on the local backend (default: cores)."),
+    jobs: Optional[int] = typer.Option(None, "--jobs", min=1, max=256, help="Runs at a time on the local backend (default: cores)."),
     address: Optional[str] = typer.Option(None, "--address", help="Ray cluster address (default: a local Ray)."),
     seeds: Optional[str] = SEEDS_OPT,
     cells: Optional[str] = CELLS_OPT,

@@ -16,16 +16,22 @@ from sb3_disagree.priors.language import load_embedding
 
 app = typer.Typer(help="The prior zoo: list, show, add, remove, evaluate and train priors.", no_args_is_help=True)
 
-ZOO_OPT = typer.Option(None, "--zoo", help="Zoo folder, or 'greedy' for the shipped greedy zoo (default: the "
-                       "shipped zoo).")
+ZOO_OPT = typer.Option(None, "--zoo", help="Zoo folder, 'greedy' for the shipped greedy zoo, or 'user' for yours "
+                       "(default: the shipped zoo).")
+WRITE_ZOO_OPT = typer.Option(None, "--zoo", help="Zoo folder to write to (default: yours, $SB3_DISAGREE_ZOO or "
+                             "~/.local/share/sb3-disagree/zoo; the shipped zoos are read-only).")
+WRITE_SHIPPED_OPT = typer.Option(False, "--write-shipped", help="Allow writing into a zoo the package ships.")
+TRUST_OPT = typer.Option(False, "--trust", help="Open the model file as SB3 does, unpickling what it carries (a file "
+                         "you made or trust).")
 ENV_OPT = typer.Option(DEFAULT_ENV, "--env", help="Gymnasium id of the environment.")
 EMB_OPT = typer.Option(None, "--embedding", help="Word vectors (word2vec/GloVe/fastText/KeyedVectors); default MiniLM.")
 
 
-def _zoo(path: Optional[Path]):
-    from sb3_disagree.priors.zoo import Zoo
+def _zoo(path: Optional[Path], writing: bool = False, write_shipped: bool = False):
+    """The zoo a command reads (the shipped one by default) or writes (the user's by default)."""
+    from sb3_disagree.priors.zoo import Zoo, user_zoo
 
-    return Zoo(path)
+    return Zoo(user_zoo() if writing and path is None else path, write_shipped=write_shipped)
 
 
 class PlainProgress:
@@ -127,46 +133,50 @@ def add(
     env: str = ENV_OPT,
     episodes: int = typer.Option(100, "--episodes", help="Evaluation episodes for the card (0: none)."),
     replace: bool = typer.Option(False, "--replace", help="Replace an existing prior for this goal."),
-    zoo: Optional[Path] = ZOO_OPT,
+    zoo: Optional[Path] = WRITE_ZOO_OPT,
+    write_shipped: bool = WRITE_SHIPPED_OPT,
+    trust: bool = TRUST_OPT,
 ) -> None:
-    """Add a saved model to the zoo, evaluated and with its card; a model card beside the model (as dopt train
+    """Add a saved model to your zoo, evaluated and with its card; a model card beside the model (as dopt train
     writes) gives the goal and how the model was trained (sb3_disagree.priors.make.add_prior)."""
     with clean_errors():
         from sb3_disagree.priors.make import add_prior
 
-        z = _zoo(zoo)
-        console.print(f"[yellow]note:[/] loading {model} runs code it may hold (SB3 model files are pickles): add "
-                      "only files you trust (docs/survival.md)")
+        z = _zoo(zoo, writing=True, write_shipped=write_shipped)
         with _progress() as progress:
             tasks = {label: progress.add_task(f"evaluating ({label})", total=episodes) for label in ("greedy", "sampled")}
             entry, evaluations = add_prior(z, model, env, goal, episodes, replace, command_line(),
-                                           lambda label, n: progress.update(tasks[label], completed=n))
+                                           lambda label, n: progress.update(tasks[label], completed=n), trust)
         _show_evaluations(entry.goal, evaluations)
         console.print(f"added {entry.goal!r} to {z.root}")
 
 
 @app.command()
-def remove(goal: str, env: str = ENV_OPT, zoo: Optional[Path] = ZOO_OPT) -> None:
-    """Remove a prior from the zoo."""
+def remove(goal: str, env: str = ENV_OPT, zoo: Optional[Path] = WRITE_ZOO_OPT,
+           write_shipped: bool = WRITE_SHIPPED_OPT) -> None:
+    """Remove a prior from your zoo."""
     with clean_errors():
-        _zoo(zoo).remove(goal, env)
+        _zoo(zoo, writing=True, write_shipped=write_shipped).remove(goal, env)
         console.print(f"removed {goal!r}")
 
 
 @app.command("eval")
 def eval_prior(
     goal: str,
-    episodes: int = typer.Option(100, "--episodes"),
+    episodes: int = typer.Option(100, "--episodes", min=1),
     deterministic: Optional[bool] = typer.Option(None, "--deterministic/--stochastic", help="Only greedy or only "
                                                  "sampled actions (default: both, side by side)."),
     seed: int = typer.Option(CARD_SEED, "--seed", help="Seed of the first env; the card's episodes start at 10000."),
     record: bool = typer.Option(False, "--record", help="Write the evaluations on the prior's card."),
     env: str = ENV_OPT,
     zoo: Optional[Path] = ZOO_OPT,
+    write_shipped: bool = WRITE_SHIPPED_OPT,
 ) -> None:
     """Evaluate a prior alone from the environment's start distribution, greedy and sampled."""
     with clean_errors():
-        z = _zoo(zoo)
+        z = _zoo(zoo, write_shipped=write_shipped)
+        if record:
+            z.check_writable()  # before the episodes
         entry = z.get(goal, env)
         for greedy in (True, False) if deterministic is None else (deterministic,):
             result = _evaluate(z, entry, episodes, greedy, seed)
@@ -191,7 +201,11 @@ def _make_options() -> list:
                                             "flags_cnn", "expert_no_return"),
                         flags={"loop_flags": "--loop-flags/--no-loop-flags"},
                         helps={k: "DAgger: " + v for k, v in param_help(train_dagger).items()}),
-            *options_of(list_priors, only=("zoo",))]
+            *options_of(_writes, only=("zoo", "write_shipped"))]
+
+
+def _writes(zoo: Optional[Path] = WRITE_ZOO_OPT, write_shipped: bool = WRITE_SHIPPED_OPT) -> None:
+    """The options of a command that writes a prior."""
 
 
 @app.command()
@@ -202,6 +216,7 @@ def train(**options) -> None:
         from sb3_disagree.priors.make import make_prior
 
         goal, method, zoo = options.pop("goal"), options.pop("method"), options.pop("zoo")
+        z = _zoo(zoo, writing=True, write_shipped=options.pop("write_shipped"))
         dagger = {k: options.pop(k) for k in ("rounds", "steps_per_round", "epochs", "final_epochs",
                                               "validation_episodes", "learner_actions", "frame_stack",
                                               "loop_flags", "flags_cnn", "expert_no_return")}
@@ -212,7 +227,7 @@ def train(**options) -> None:
             kept = phase > 0 and options["consistency_validation_episodes"] > 0  # the line of the kept round
             total = (lines if method == "dagger" else 1) + phase + kept
             task = progress.add_task(f"{method} {goal}", total=total)
-            entry, evaluations = make_prior(_zoo(zoo), goal, method=method, command=command_line(),
+            entry, evaluations = make_prior(z, goal, method=method, command=command_line(),
                                             progress=lambda line: (progress.advance(task), console.print(line)),
                                             **options, **(dagger if method == "dagger" else {}))
         _show_evaluations(goal, evaluations)
@@ -225,7 +240,7 @@ def _refine_options() -> list:
                                             "episodes", "only_if_better", "validation_episodes",
                                             "expert_in_loops"),
                         flags={"env_id": "--env"}, defaults={"env_id": DEFAULT_ENV}),
-            *options_of(list_priors, only=("zoo",))]
+            *options_of(_writes, only=("zoo", "write_shipped"))]
 
 
 @app.command()
@@ -237,10 +252,11 @@ def refine(**options) -> None:
         from sb3_disagree.priors.make import refine_entry
 
         goal, zoo = options.pop("goal"), options.pop("zoo")
+        z = _zoo(zoo, writing=True, write_shipped=options.pop("write_shipped"))
         with _progress() as progress:
             task = progress.add_task(f"refining {goal}", total=options["rounds"] + (options["validation_episodes"] > 0))
             entry, evaluations, replaced = refine_entry(
-                _zoo(zoo), goal, command=command_line(),
+                z, goal, command=command_line(),
                 progress=lambda line: (progress.advance(task), console.print(line)), **options)
         _show_evaluations(goal, evaluations)
         if not replaced:

@@ -51,7 +51,8 @@ def _run_options() -> list:
     from sb3_disagree.run import RunConfig, train as run
     from sb3_disagree.run.config import DOPT_TRAIN_FRAME_STACK, DOPT_TRAIN_HARVEST, DOPT_TRAIN_VALIDATION
 
-    helps = {"steps": "Env steps to train (default 100000); with --resume, the run's new total (default: its saved "
+    helps = {"goal": "The new goal word (required, but with --resume: the run's own)",
+             "steps": "Env steps to train (default 100000); with --resume, the run's new total (default: its saved "
                       "one)", "priors": "auto (the two nearest the goal in the embedding), or the priors' goals: a,b",
              "consistency_harvest": "model.zip is fitted to the loop-free paths of the successful episodes of the "
                                     f"last this many training steps, no env step more (default: {DOPT_TRAIN_HARVEST} for "
@@ -69,7 +70,7 @@ def _run_options() -> list:
                            "frame of the stack: pressed against a wall, turning back and forth (default: on for "
                            "--mode kickstart on image observations)"}
     return [*options_of(RunConfig, skip=("acer_kwargs", "env_kwargs"),
-                        types={"priors": str, "steps": Optional[int], "consistency_harvest": Optional[int],
+                        types={"goal": Optional[str], "priors": str, "steps": Optional[int], "consistency_harvest": Optional[int],
                                "frame_stack": Optional[int], "loop_flags": Optional[bool],
                                "greedy_phase": Optional[int], "consistency_validation": Optional[int]},
                         flags={"env_id": "--env", "consistency_harvest_average":
@@ -80,10 +81,10 @@ def _run_options() -> list:
                         # last episodes, acted greedily by the current weights (DOPT_TRAIN_HARVEST); None: resolved in
                         # train. Its new kickstarting runs see three frames, with loop flags (DOPT_TRAIN_FRAME_STACK),
                         # and validate the harvest's fit epoch by epoch (DOPT_TRAIN_VALIDATION).
-                        defaults={"overlap": True, "steps": None, "consistency_harvest": None,
+                        defaults={"goal": None, "overlap": True, "steps": None, "consistency_harvest": None,
                                   "frame_stack": None, "loop_flags": None, "greedy_phase": None,
                                   "consistency_validation": None}),
-            *options_of(run, only=("out", "resume", "force"), types={"resume": Optional[Path], "out": Path}),
+            *options_of(run, only=("out", "resume", "force", "trust"), types={"resume": Optional[Path], "out": Path}),
             *options_of(_cli_only, flags={"average_ahead": "--average-ahead/--no-average-ahead"})]
 
 
@@ -123,13 +124,19 @@ def train(**options) -> None:
     with clean_errors():
         from sb3_disagree.run import RunConfig, check_resume, train as run, write_card
 
-        out, resume, force, card_episodes, every = (
-            options.pop(k) for k in ("out", "resume", "force", "card_episodes", "progress_every"))
+        out, resume, force, card_episodes, every, trust = (
+            options.pop(k) for k in ("out", "resume", "force", "card_episodes", "progress_every", "trust"))
+        if options["goal"] is None:
+            if resume is None:
+                raise ValueError("--goal is required: the new goal word (or --resume RUN to continue a run)")
+            from sb3_disagree.run.evaluation import read_config
+
+            options["goal"] = read_config(resume)["goal"]
         options["acer_kwargs"] = {k: v for k in ("reward_scale", "ema_decay", "features_dtype") if (v := options.pop(k)) is not None}
         _default_ahead(options, resume)
         options["env_kwargs"] = {k: v for k in ("collision_penalty", "reward_distance") if (v := options.pop(k)) is not None}
         steps = options["steps"]
-        budget = steps or 100_000
+        budget = 100_000 if steps is None else steps
         _default_harvest(options, resume, budget)
         _default_memory(options, resume)
         config = RunConfig(**{**options, "steps": budget, "priors": _priors(options["priors"])})
@@ -138,7 +145,7 @@ def train(**options) -> None:
         with display as callback:
             run_dir, model, finished = run(config, out, resume=resume, callbacks=[callback], force=force,
                                            on_priors=_show_priors, steps=steps if resume is not None else None,
-                                           on_round=_show_round)
+                                           on_round=_show_round, trust=trust)
         if card_episodes and finished:
             console.print(f"evaluating the new policy alone for its card ({card_episodes} episodes each way)")
         _show_evaluations(write_card(run_dir, model, card_episodes if finished else 0, command_line()))
@@ -276,7 +283,7 @@ def _show_end(run_dir: Path, model, finished: bool, goal: str) -> None:
 
 def eval_run(
     run_or_model: Path = typer.Argument(..., help="A run folder or a model.zip."),
-    episodes: int = typer.Option(100, "--episodes", min=1),
+    episodes: int = typer.Option(100, "--episodes", min=1, max=100_000),
     deterministic: Optional[bool] = typer.Option(None, "--deterministic/--stochastic", help="Only greedy or only "
                                                  "sampled actions (default: both, side by side; greedy for "
                                                  "--video and --trajectory)."),
@@ -284,10 +291,12 @@ def eval_run(
                                        "(default: the run's seed + 20000, as the run's own final evaluation)."),
     video: Optional[Path] = typer.Option(None, "--video", help="Record the policy alone in episodes of its own: "
                                          "the agent's view beside the map (.gif or .mp4)."),
-    video_episodes: int = typer.Option(3, "--video-episodes", min=1, help="Episodes the video records."),
+    video_episodes: int = typer.Option(3, "--video-episodes", min=1, max=100, help="Episodes the video records."),
     trajectory: Optional[Path] = typer.Option(None, "--trajectory", help="Draw an episode of the policy alone on "
                                               "the map (PNG)."),
-    episode: int = typer.Option(1, "--episode", min=1, help="Which of its episodes --trajectory draws."),
+    episode: int = typer.Option(1, "--episode", min=1, max=1000, help="Which of its episodes --trajectory draws."),
+    trust: bool = typer.Option(False, "--trust", help="Open the model file as SB3 does, unpickling what it carries "
+                               "(a file you made or trust)."),
 ) -> None:
     """Evaluate the new policy alone (no priors): success rate, episode length, return; watch it with --video."""
     with clean_errors():
@@ -300,7 +309,7 @@ def eval_run(
             if target is not None and not target.parent.is_dir():
                 raise ValueError(f"{target}: the folder {target.parent} does not exist")
         labels = ("greedy", "sampled") if deterministic is None else ("greedy" if deterministic else "sampled",)
-        config, model = load_run(run_or_model)
+        config, model = load_run(run_or_model, trust)
         results = evaluate_both(model, config, episodes, seed, labels)
         for label, result in results.items():
             console.print(f"{config['goal']}: success {result.success_rate:.2f}, mean length {result.mean_length:.1f}, "
@@ -341,19 +350,22 @@ def consistency(
     episodes: int = typer.Option(100, "--episodes", help="Evaluation episodes each way after the phase (0: none)."),
     force: bool = typer.Option(False, "--force", help="Replace an earlier phase's folder."),
     name: str = typer.Option("consistent", "--name", help="The folder inside RUN the refined model goes to."),
+    trust: bool = typer.Option(False, "--trust", help="Open the model file as SB3 does, unpickling what it carries "
+                               "(a file you made or trust)."),
 ) -> None:
     """Greedy consistency: act greedily, sample only in loops, fit the loop-free paths that reach the goal;
     the refined model and its evaluation alone (greedy and sampled) go to RUN/consistent/ (--name)."""
     with clean_errors():
-        _consistency(run, rounds, steps, epochs, learning_rate, episodes, force, name)
+        _consistency(run, rounds, steps, epochs, learning_rate, episodes, force, name, trust)
 
 
 def _consistency(run: Path, rounds: int = 3, steps: int = 20_000, epochs: int = 3, learning_rate: float = 3e-4,
-                 episodes: int = 100, force: bool = False, name: str = "consistent") -> None:
+                 episodes: int = 100, force: bool = False, name: str = "consistent", trust: bool = False) -> None:
     from sb3_disagree.run.consistency import refine_run
 
     console.print(f"greedy consistency: {rounds} rounds of {steps:,} env steps")
-    result = refine_run(run, rounds, steps, epochs, learning_rate, episodes, force, name, on_round=_show_round)
+    result = refine_run(run, rounds, steps, epochs, learning_rate, episodes, force, name, on_round=_show_round,
+                        trust=trust)
     for label, key in (("greedy", "final_alone_greedy"), ("sampled", "final_alone")):
         if key in result:
             console.print(f"the refined policy alone, {label}: success {result[key]['success_rate']:.2f} over "

@@ -27,6 +27,7 @@ from sb3_disagree.files import write_atomic
 CHECKPOINTS = "checkpoints"
 STATE = "state.json"
 KEEP = 2
+BUFFER = "replay_buffer.npz"  # arrays only: loading a checkpoint runs nothing
 # The logs a run appends to; a resumed run cuts them back to their size at its checkpoint.
 LOG_PATTERNS = ("progress.csv", "trajectories.jsonl", "monitor/*.monitor.csv")
 
@@ -72,8 +73,8 @@ def save_checkpoint(model: Any, run_dir: Path, with_buffer: bool = True) -> Path
     files = {"model.zip": tmp / "model.zip"}
     model.save(files["model.zip"])
     if with_buffer and hasattr(model, "save_replay_buffer"):
-        files["replay_buffer.pkl"] = tmp / "replay_buffer.pkl"
-        model.save_replay_buffer(files["replay_buffer.pkl"])
+        files[BUFFER] = tmp / BUFFER
+        model.save_replay_buffer(files[BUFFER])
     for path in files.values():
         _fsync(path)
     state = {"num_timesteps": int(model.num_timesteps), "files": {n: _sha256(p) for n, p in files.items()},
@@ -108,12 +109,42 @@ def latest_checkpoint(run_dir: Path) -> Optional[tuple[Path, dict[str, Any]]]:
     root = run_dir / CHECKPOINTS
     if not root.exists():
         return None
-    for folder in sorted((p for p in root.iterdir() if p.is_dir() and not p.name.startswith(".")), reverse=True):
+    return latest_checkpoint_in(sorted((p for p in root.iterdir() if p.is_dir() and not p.name.startswith(".")),
+                                       reverse=True))
+
+
+def resume_point(run_dir: Path) -> tuple[Path, dict[str, Any]]:
+    """
+    The checkpoint a run resumes from: the newest whose files match their hashes. Newer ones that do not are moved
+    aside (``checkpoints/.damaged-<steps>``), never deleted; where none is intact, a ValueError in one line.
+    """
+    root = run_dir / CHECKPOINTS
+    moved = []
+    for folder in sorted((p for p in root.iterdir() if p.is_dir() and not p.name.startswith(".")), reverse=True) \
+            if root.is_dir() else []:
+        found = latest_checkpoint_in([folder])
+        if found is not None:
+            return found
+        aside = root / f".damaged-{folder.name}"
+        n = 1
+        while aside.exists():
+            n += 1
+            aside = root / f".damaged-{folder.name}-{n}"
+        os.replace(folder, aside)
+        moved.append(aside.name)
+    where = f" (damaged: moved aside as {', '.join(moved)})" if moved else ""
+    raise ValueError(f"{run_dir} has no intact checkpoint to resume from{where}; start it again with --force "
+                     "instead of --resume")
+
+
+def latest_checkpoint_in(folders: list[Path]) -> Optional[tuple[Path, dict[str, Any]]]:
+    """The first of ``folders`` that is a complete checkpoint whose files match their hashes, with its state."""
+    for folder in folders:
         try:
             state = json.loads((folder / STATE).read_text())
             if all(_sha256(folder / name) == digest for name, digest in state["files"].items()):
                 return folder, state
-        except (OSError, ValueError, KeyError, TypeError):
+        except (OSError, ValueError, KeyError, TypeError, AttributeError):
             pass  # incomplete or damaged: the one before
     return None
 

@@ -5,6 +5,8 @@ import tempfile
 from pathlib import Path
 from typing import Union
 
+MAX_NAME = 100  # bytes of a word that names a folder (file systems take 255, and runs nest a few such names)
+
 
 def write_atomic(path: Union[str, Path], data: Union[bytes, str], mode: int = 0o644) -> None:
     """
@@ -37,4 +39,6 @@ def safe_name(word: str, what: str) -> str:
     """
     if not isinstance(word, str) or not word.strip() or word.strip(".") == "" or any(c in word for c in "/\\\0"):
         raise ValueError(f"{what} {word!r} cannot name a folder: use a word without '/', '\\\\' or leading dots only")
+    if len(word.encode()) > MAX_NAME:
+        raise ValueError(f"{what} is {len(word.encode())} bytes long: a folder's name takes at most {MAX_NAME}")
     return word

@@ -82,7 +82,7 @@ def test_sigterm_saves_like_ctrl_c_and_the_run_resumes(tmp_path):
     saved = yaml.safe_load((run / "config.yaml").read_text())
     folder, state = latest_checkpoint(run)
     assert not saved["finished"] and state["num_timesteps"] == saved["num_timesteps"] >= 600
-    assert (folder / "replay_buffer.pkl").exists()
+    assert (folder / "replay_buffer.npz").exists()
     target = saved["num_timesteps"] + 200
     result = runner.invoke(app, ["train", "--goal", "bathtub", "--resume", str(run), "--steps", str(target),
                                  "--card-episodes", "0"])

@@ -4,7 +4,8 @@ import re
 import subprocess
 from pathlib import Path
 
-import click
+from typing import Any
+
 import typer
 import typer.testing
 
@@ -61,7 +62,7 @@ def test_every_help_text_shows_whole():
     """Rich reads "[...]" in a help text as markup and drops it: no help text holds one."""
     swallowed = []
 
-    def walk(command: click.Command, path: str) -> None:
+    def walk(command: Any, path: str) -> None:
         for name, sub in getattr(command, "commands", {}).items():
             walk(sub, f"{path} {name}")
         swallowed.extend(f"{path} {p.name}" for p in command.params if "[" in (getattr(p, "help", None) or ""))

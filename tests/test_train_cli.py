@@ -212,7 +212,7 @@ def test_overlap_trains_evaluates_and_resumes(zoo, tmp_path):
     # An interrupted overlapped run saves what it learned and resumes overlapped.
     config = RunConfig(goal="bathtub", env_id=STATE_ID, steps=600, n_envs=2, zoo=str(zoo), overlap=True, seed=1)
     run, model, finished = train(config, tmp_path, callbacks=[StopAt(200)])
-    assert not finished and (_checkpoint(run) / "replay_buffer.pkl").exists()
+    assert not finished and (_checkpoint(run) / "replay_buffer.npz").exists()
     result = runner.invoke(app, ["train", "--goal", "bathtub", "--resume", str(run)])
     assert result.exit_code == 0, result.output
     cfg = yaml.safe_load((run / "config.yaml").read_text())
@@ -274,7 +274,7 @@ def _checkpoint(run):
 def test_interrupt_saves_and_resume_continues_the_step_count(zoo, tmp_path):
     config = RunConfig(goal="bathtub", env_id=STATE_ID, steps=600, n_envs=2, zoo=str(zoo))
     run, model, finished = train(config, tmp_path, callbacks=[StopAt(200)])
-    assert not finished and (_checkpoint(run) / "replay_buffer.pkl").exists() and (run / "model.zip").exists()
+    assert not finished and (_checkpoint(run) / "replay_buffer.npz").exists() and (run / "model.zip").exists()
     stopped_at = model.num_timesteps
     assert 200 <= stopped_at < 600
     result = runner.invoke(app, ["train", "--goal", "bathtub", "--resume", str(run)])
@@ -283,7 +283,7 @@ def test_interrupt_saves_and_resume_continues_the_step_count(zoo, tmp_path):
     assert cfg["finished"] and cfg["num_timesteps"] >= 600
     assert cfg["overlap"] is False  # the saved run's loop, whatever the command line's default
     assert ACER.load(run / "model.zip").num_timesteps == cfg["num_timesteps"]
-    assert not (_checkpoint(run) / "replay_buffer.pkl").exists()  # a finished run keeps no buffer
+    assert not (_checkpoint(run) / "replay_buffer.npz").exists()  # a finished run keeps no buffer
     assert len(list((run / "checkpoints").iterdir())) == 1  # nor older checkpoints
     # A finished run continues to a larger budget on request.
     result = runner.invoke(app, ["train", "--goal", "bathtub", "--resume", str(run), "--steps", "1000"])

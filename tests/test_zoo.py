@@ -46,7 +46,7 @@ def zoo(tmp_path, model_files):
     return z
 
 
-def test_cards_record_what_the_issue_asks(zoo, model_files):
+def test_cards_record_how_each_prior_was_made(zoo, model_files):
     entry = zoo.get("bed", STATE_ID)
     card = json.loads((entry.path / "card.json").read_text())
     for key in ["goal", "env_id", "env_kwargs", "observation_space", "action_space", "sb3_class", "training",
@@ -509,7 +509,9 @@ def test_a_shipped_zoo_by_name_unless_a_folder_has_that_name(tmp_path, monkeypat
     trust.write_text("0" * 64 + "\n")
     model = ACER("MlpPolicy", make_vec_env(STATE_ID, n_envs=1, env_kwargs=dict(goal="bed")), seed=0)
     model.save(tmp_path / "bed.zip")
-    Zoo(shipped).add(tmp_path / "bed.zip", "bed", STATE_ID, training={"method": "test"})
+    with pytest.raises(ZooError, match="read-only"):  # the shipped zoos are the package's own
+        Zoo(shipped).add(tmp_path / "bed.zip", "bed", STATE_ID, training={"method": "test"})
+    Zoo(shipped, write_shipped=True).add(tmp_path / "bed.zip", "bed", STATE_ID, training={"method": "test"})
     assert Zoo("greedy", trusted=trust).get("bed", STATE_ID).problem is None
     listed = runner.invoke(app, ["priors", "list", "--zoo", "greedy", "--env", STATE_ID])
     assert listed.exit_code == 0 and "bed" in listed.output, listed.output

@@ -3,6 +3,7 @@
 import contextlib
 import io
 import pathlib
+import zipfile
 from typing import Any, Callable, ClassVar, Optional, TypeVar, Union
 
 import numpy as np
@@ -12,7 +13,7 @@ from stable_baselines3.common.base_class import BaseAlgorithm
 from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.on_policy_algorithm import OnPolicyAlgorithm
 from stable_baselines3.common.policies import BasePolicy
-from stable_baselines3.common.save_util import load_from_pkl, save_to_pkl
+from stable_baselines3.common.save_util import load_from_pkl
 from stable_baselines3.common.type_aliases import GymEnv, MaybeCallback, Schedule
 from stable_baselines3.common.utils import obs_as_tensor
 from stable_baselines3.common.vec_env import VecEnv
@@ -605,21 +606,30 @@ class ACER(BaseAlgorithm):
 
     # ------------------------------------------------------------------ replay buffer I/O
 
-    def save_replay_buffer(self, path: Union[str, pathlib.Path, io.BufferedIOBase]) -> None:
+    def save_replay_buffer(self, path: Union[str, pathlib.Path]) -> None:
         """
-        Save the replay buffer as a pickle file.
+        Save the replay buffer as arrays (numpy's ``.npz`` format, to the exact path given): unlike SB3's pickle,
+        loading it back runs nothing.
 
         :param path: Path to the file where the replay buffer should be saved
         """
-        save_to_pkl(path, self.replay_buffer, self.verbose)
+        self.replay_buffer.save(path)
 
-    def load_replay_buffer(self, path: Union[str, pathlib.Path, io.BufferedIOBase]) -> None:
+    def load_replay_buffer(self, path: Union[str, pathlib.Path], trust: bool = False) -> None:
         """
-        Load a replay buffer from a pickle file.
+        Load a replay buffer saved by :meth:`save_replay_buffer`; a pickled one (as SB3 saves them) only with
+        ``trust``, since unpickling a file can run its code.
 
-        :param path: Path to the pickled replay buffer
+        :param path: Path to the saved replay buffer
+        :param trust: Also accept a pickled buffer
         """
-        buffer = load_from_pkl(path, self.verbose)
+        if zipfile.is_zipfile(path):
+            buffer = SegmentReplayBuffer.load(path)
+        elif trust:
+            buffer = load_from_pkl(path, self.verbose)
+        else:
+            raise ValueError(f"{path} is a pickled replay buffer: loading it could run code; pass --trust if you "
+                             "made it")
         if not isinstance(buffer, SegmentReplayBuffer):
             raise ValueError(f"{path} does not hold an ACER segment replay buffer")
         expected = (self.n_steps, self.n_envs, int(self.action_space.n))

@@ -1,7 +1,9 @@
 """Segment storage for ACER: one rollout of ``n_steps`` per env, with the full behaviour distribution mu."""
 
+import zipfile
 from dataclasses import dataclass
-from typing import Optional
+from pathlib import Path
+from typing import Optional, Union
 
 import numpy as np
 from gymnasium import spaces
@@ -90,6 +92,40 @@ class SegmentReplayBuffer:
         self.followed = np.zeros((s, t, e), dtype=np.float32)
         self.pos = 0
         self.full = False
+
+    ARRAYS = ("first_stacks", "observations", "actions", "rewards", "dones", "timeout_values", "mu", "teacher", "followed")
+
+    def save(self, path: Union[str, Path]) -> None:
+        """Write the buffer as arrays (numpy's ``.npz``, nothing pickled), to the exact ``path`` given."""
+        arrays = {name: getattr(self, name) for name in self.ARRAYS if hasattr(self, name)}
+        meta = np.array([self.n_steps, self.n_envs, self.n_actions, self.frame_stack, self.n_segments, self.pos,
+                         int(self.full)], dtype=np.int64)
+        with open(path, "wb") as f:
+            np.savez(f, meta=meta, **arrays)
+
+    @classmethod
+    def load(cls, path: Union[str, Path]) -> "SegmentReplayBuffer":
+        """
+        A buffer written by :meth:`save` (read with ``allow_pickle=False``: nothing in the file can run).
+
+        :raises ValueError: A file that is not such a buffer
+        """
+        try:
+            with np.load(path, allow_pickle=False) as data:
+                n_steps, n_envs, n_actions, frame_stack, n_segments, pos, full = (int(x) for x in data["meta"])
+                buffer = cls.__new__(cls)
+                buffer.n_steps, buffer.n_envs, buffer.n_actions = n_steps, n_envs, n_actions
+                buffer.frame_stack, buffer.n_segments, buffer.pos, buffer.full = frame_stack, n_segments, pos, bool(full)
+                for name in cls.ARRAYS:
+                    if name in data:
+                        setattr(buffer, name, data[name])
+        except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile) as exc:
+            raise ValueError(f"{path} is not a replay buffer this package wrote ({exc})") from None
+        shapes = (n_segments, n_steps, n_envs)
+        if any(getattr(buffer, name, None) is None for name in cls.ARRAYS[1:]) or buffer.actions.shape != shapes \
+                or buffer.mu.shape != (*shapes, n_actions) or not 0 <= pos < n_segments:
+            raise ValueError(f"{path} is not a replay buffer this package wrote (its arrays do not fit together)")
+        return buffer
 
     @property
     def n_stored(self) -> int:

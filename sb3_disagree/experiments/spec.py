@@ -172,6 +172,9 @@ class Experiment:
             return isinstance(values, list) and all(isinstance(v, int) and not isinstance(v, bool) and v >= 0
                                                     for v in values)
 
+        if not isinstance(self.name, str):
+            raise ValueError(f"an experiment's name must be a word (it names its results folder), got {self.name!r}")
+        safe_name(self.name, "an experiment's name")
         if not isinstance(self.goal, str):
             raise ValueError(f"experiment {self.name!r}: goal must be a word, got {self.goal!r}")
         for name in ("steps", "final_episodes"):
@@ -245,11 +248,21 @@ def find_experiment(name_or_path: str, search: Optional[Path] = None) -> Path:
 def load_experiment(name_or_path: str, search: Optional[Path] = None) -> Experiment:
     """Read and check an experiment's YAML file."""
     path = find_experiment(name_or_path, search)
-    data = yaml.safe_load(path.read_text()) or {}
+    try:
+        data = yaml.safe_load(path.read_text())
+    except (yaml.YAMLError, UnicodeDecodeError) as exc:
+        raise ValueError(f"{path} is not readable YAML ({' '.join(str(exc).split())[:200]})") from None
+    if data is None:
+        data = {}
+    if not isinstance(data, dict) or not all(isinstance(k, str) for k in data):
+        raise ValueError(f"{path}: an experiment is a mapping of named fields (name, goal, cells, ...), got "
+                         f"{type(data).__name__}")
     data.setdefault("name", path.stem)
     unknown = set(data) - set(Experiment.__dataclass_fields__)
     if unknown:
         raise ValueError(f"{path}: unknown keys {sorted(unknown)}")
+    if not data.get("goal"):
+        raise ValueError(f"{path}: an experiment needs its goal ('goal: WORD')")
     if not data.get("cells"):
         raise ValueError(f"{path}: an experiment needs at least one cell under 'cells'")
     experiment = Experiment(**data)

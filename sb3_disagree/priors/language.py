@@ -25,6 +25,8 @@ from typing import Optional, Union
 
 import numpy as np
 
+from sb3_disagree.loading import is_trusted
+
 FORMATS = ("auto", "keyedvectors", "word2vec", "word2vec-binary", "glove", "fasttext")
 _FASTTEXT_MAGIC = 793712314
 
@@ -140,7 +142,7 @@ class MiniLMEmbedding(Embedding):
 
     def __init__(self, cache_dir: Optional[Union[str, Path]] = None) -> None:
         root = cache_dir or os.environ.get("SB3_DISAGREE_CACHE") or Path.home() / ".cache" / "sb3-disagree"
-        self.cache_path = Path(root) / "minilm-l6-v2.kv"
+        self.cache_path = Path(root) / "minilm-l6-v2.npz"  # arrays only: reading the cache runs nothing
         self._model = None
         self._kv = None
 
@@ -164,7 +166,9 @@ class MiniLMEmbedding(Embedding):
 
             if self.cache_path.exists():
                 try:
-                    self._kv = KeyedVectors.load(str(self.cache_path))
+                    with np.load(self.cache_path, allow_pickle=False) as data:
+                        self._kv = KeyedVectors(vector_size=384)
+                        self._kv.add_vectors([str(k) for k in data["keys"]], data["vectors"].astype(np.float32))
                 except Exception:  # a damaged cache is rebuilt, never trusted
                     self._kv = None
             if self._kv is None:
@@ -202,9 +206,9 @@ class MiniLMEmbedding(Embedding):
     def _save_cache(self) -> None:
         try:
             self.cache_path.parent.mkdir(parents=True, exist_ok=True)
-            fd, tmp = tempfile.mkstemp(dir=self.cache_path.parent, suffix=".kv")
-            os.close(fd)
-            self.cache.save(tmp)
+            fd, tmp = tempfile.mkstemp(dir=self.cache_path.parent, suffix=".npz")
+            with os.fdopen(fd, "wb") as f:
+                np.savez(f, keys=np.array(self.cache.index_to_key, dtype=str), vectors=self.cache.vectors)
             os.replace(tmp, self.cache_path)
         except OSError:
             pass  # a read-only home only costs recomputation
@@ -233,12 +237,14 @@ def detect_format(path: Union[str, Path]) -> str:
     return "glove"
 
 
-def load_embedding(path: Optional[Union[str, Path]] = None, format: str = "auto") -> Embedding:
+def load_embedding(path: Optional[Union[str, Path]] = None, format: str = "auto", trust: bool = False) -> Embedding:
     """
     Load word vectors.
 
     :param path: A word2vec / GloVe / fastText file or a saved ``KeyedVectors``; None for the default
     :param format: One of ``FORMATS``; "auto" detects it
+    :param trust: Also read saved ``KeyedVectors``, a pickle (loading one can run its code): only a file you made
+        or whose source you trust (or whose SHA-256 is on the trust list, ``sb3_disagree.loading``)
     :return: The embedding
     """
     if path is None:
@@ -252,6 +258,9 @@ def load_embedding(path: Optional[Union[str, Path]] = None, format: str = "auto"
         raise ValueError(f"the embedding {path} is not a file (a word2vec, GloVe or fastText file, or saved "
                          "KeyedVectors)")
     fmt = detect_format(path) if format == "auto" else format
+    if fmt == "keyedvectors" and not is_trusted(path, trust):
+        raise ValueError(f"the embedding {path} is saved KeyedVectors, a pickle: loading it could run code; pass "
+                         "--trust if you made it, or give word2vec, GloVe or fastText vectors")
     from gensim.models import KeyedVectors
 
     try:

@@ -296,6 +296,7 @@ def make_prior(zoo: Any, goal: str, env_id: str, method: str = "dagger", steps: 
     """
     from sb3_disagree.defaults import PRIOR_VALIDATION_SEED
 
+    zoo.check_writable()  # before any training
     if method not in METHODS:
         raise ValueError(f"--method must be one of {', '.join(METHODS)}, got {method!r}")
     if not replace and any(e.goal == goal for e in zoo.entries(env_id)):
@@ -427,6 +428,7 @@ def refine_entry(zoo: Any, goal: str, env_id: str, rounds: int, steps: int = 20_
     """
     from sb3_disagree.defaults import PRIOR_CARD_SEED
 
+    zoo.check_writable()  # before any training
     if rounds < 1 or steps < n_envs or not 0 <= loop_uniform <= 1 or episodes < 0 or validation_episodes < 0:
         raise ValueError(f"--rounds must be >= 1, --steps >= {n_envs} (one per env), --loop-uniform in [0, 1], "
                          f"--episodes >= 0 and --validation-episodes >= 0, got {rounds}, {steps}, {loop_uniform}, "
@@ -490,13 +492,13 @@ def record_evaluations(zoo: Any, entry: Any, episodes: int,
 
 
 def add_prior(zoo: Any, model_path: Any, env_id: str, goal: Optional[str] = None, episodes: int = 100,
-              replace: bool = False, command: str = "",
-              progress: Optional[Callable[[str, int], None]] = None) -> tuple[Any, dict[str, Evaluation]]:
+              replace: bool = False, command: str = "", progress: Optional[Callable[[str, int], None]] = None,
+              trust: bool = False) -> tuple[Any, dict[str, Evaluation]]:
     """
     Add a saved SB3 model to the zoo and record its evaluation alone (greedy and sampled) on its card: what
     ``dopt priors add`` does. A model card beside the model (as ``dopt train`` writes) gives the goal and how
-    the model was trained. Loading a model file runs code it may hold (SB3 files are pickles): add only files
-    you trust.
+    the model was trained. The file is opened without unpickling what it carries (``sb3_disagree.loading``); one
+    that needs that is refused unless ``trust``.
 
     :param zoo: The :class:`~sb3_disagree.priors.zoo.Zoo`
     :param model_path: The model file
@@ -506,9 +508,12 @@ def add_prior(zoo: Any, model_path: Any, env_id: str, goal: Optional[str] = None
     :param replace: Replace an existing prior for this goal
     :param command: The command that added it, for the card
     :param progress: Called with the label and the number of finished episodes
+    :param trust: Open the file as SB3 does, unpickling what it carries (a file you made or trust)
     :return: The zoo entry (as read back) and the evaluations by label
     """
     from sb3_disagree.model_card import CARD_NAME, read_model_card
+
+    zoo.check_writable()
 
     model_path = Path(model_path)
     if not model_path.exists():
@@ -522,5 +527,6 @@ def add_prior(zoo: Any, model_path: Any, env_id: str, goal: Optional[str] = None
         raise ValueError(f"the model card beside {model_path} says it was trained in {run['env_id']}, not {env_id}; "
                          f"pass --env {run['env_id']}")
     made = {"model_card": {k: run.get(k) for k in ("mode", "steps", "seed", "command", "priors")}} if run else {}
-    entry = zoo.add(model_path, goal, env_id, training={"method": "external", **made}, command=command, replace=replace)
+    entry = zoo.add(model_path, goal, env_id, training={"method": "external", **made}, command=command, replace=replace,
+                    trust=trust)
     return record_evaluations(zoo, entry, episodes, progress) if episodes else (entry, {})

@@ -14,7 +14,7 @@ PathLike = Union[str, Path, None]
 
 
 def choose_priors(goal: str, env_id: str, env: Any, priors: Union[str, Sequence[str]] = "auto", zoo: PathLike = None,
-                  embedding: PathLike = None, k: int = 2) -> tuple[list[str], list[Optional[float]], list[Any]]:
+                  embedding: PathLike = None, k: int = 2, trust: bool = False) -> tuple[list[str], list[Optional[float]], list[Any]]:
     """
     The priors of a new goal, loaded and checked against the env: the ``k`` zoo entries whose goals are nearest
     ``goal`` in the embedding (``priors="auto"``), or the goals named. Named priors load no embedding; their
@@ -26,6 +26,7 @@ def choose_priors(goal: str, env_id: str, env: Any, priors: Union[str, Sequence[
     :param priors: "auto" or the goals of the priors
     :param zoo: The zoo folder (default: the shipped zoo)
     :param embedding: Word vectors file (default: MiniLM)
+    :param trust: Also read an embedding saved as a pickle (``load_embedding``)
     :param k: Number of priors chosen by similarity
     :return: The priors' goals, their similarities to ``goal`` and the loaded SB3 models
     """
@@ -34,7 +35,7 @@ def choose_priors(goal: str, env_id: str, env: Any, priors: Union[str, Sequence[
         raise ZooError(f"the zoo {zoo_.root} does not exist; make it first (dopt priors train --zoo {zoo_.root} ...)")
     labels = zoo_.labels(env_id, env.observation_space, env.action_space)
     if priors == "auto":
-        chosen = select_priors(goal, labels, load_embedding(embedding), k=k)
+        chosen = select_priors(goal, labels, load_embedding(embedding, trust=trust), k=k)
     else:
         names = list(priors)
         if len(names) < 2:

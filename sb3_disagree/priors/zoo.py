@@ -8,8 +8,6 @@ refused when loaded. Writes go to a temporary folder that is renamed into place.
 """
 
 import datetime as _dt
-import hashlib
-import importlib
 import json
 import os
 import shutil
@@ -22,6 +20,9 @@ from typing import Any, Optional, Union
 from gymnasium import spaces
 
 from sb3_disagree.files import write_atomic
+from sb3_disagree.loading import (DISTRIBUTION_CLASSES, ModelFileError, algorithm_class, check_model_file,  # noqa: F401
+                                   identify_algorithm, known_algorithm, load, register_algorithm, sha256_of,
+                                   trust_list)
 
 CARD = "card.json"
 MODEL = "model.zip"
@@ -34,26 +35,38 @@ DEFAULT_ZOO = SHIPPED / "default"
 SHIPPED_ZOOS = {"greedy": SHIPPED / "greedy"}
 
 
+def user_zoo() -> Path:
+    """
+    The zoo that the commands which write a prior use unless told otherwise (the shipped zoos are read-only):
+    ``$SB3_DISAGREE_ZOO``, else ``$XDG_DATA_HOME/sb3-disagree/zoo`` (``~/.local/share/sb3-disagree/zoo``).
+    """
+    if os.environ.get("SB3_DISAGREE_ZOO"):
+        return Path(os.environ["SB3_DISAGREE_ZOO"])
+    return Path(os.environ.get("XDG_DATA_HOME") or Path.home() / ".local" / "share") / "sb3-disagree" / "zoo"
+
+
 def zoo_root(root: Optional[Union[str, Path]] = None) -> Path:
     """
-    The folder of a zoo: the shipped zoo for None; a shipped zoo's name (``SHIPPED_ZOOS``) unless a folder of that
-    name exists where the name is read; else the folder itself.
+    The folder of a zoo: the shipped zoo for None; a shipped zoo's name (``SHIPPED_ZOOS``), or "user" for
+    :func:`user_zoo`, unless a folder of that name exists where the name is read; else the folder itself.
     """
     if root is None:
         return DEFAULT_ZOO
-    if str(root) in SHIPPED_ZOOS and not Path(root).exists():
-        return SHIPPED_ZOOS[str(root)]
+    if str(root) in (*SHIPPED_ZOOS, "user") and not Path(root).exists():
+        return user_zoo() if str(root) == "user" else SHIPPED_ZOOS[str(root)]
     return Path(root)
 
 
+def is_shipped(root: Path) -> bool:
+    """Whether a folder is one of the zoos the package ships (read-only for the commands)."""
+    try:
+        return Path(root).resolve() in {z.resolve() for z in (DEFAULT_ZOO, *SHIPPED_ZOOS.values())}
+    except OSError:
+        return False
+
+
 # Algorithms whose policies expose a discrete action distribution (``policy.get_distribution``).
-DISTRIBUTION_CLASSES = {
-    "ACER": "sb3_disagree.acer.ACER",
-    "PPO": "stable_baselines3.PPO",
-    "A2C": "stable_baselines3.A2C",
-    "TRPO": "sb3_contrib.TRPO",
-    "MaskablePPO": "sb3_contrib.MaskablePPO",
-}
+
 
 
 def _memory_of(policy: Any) -> dict[str, Any]:
@@ -120,14 +133,6 @@ def space_fits(recorded: dict[str, Any], space: spaces.Space) -> bool:
     return _channel_first(recorded) == _channel_first(space_to_dict(space))
 
 
-def sha256_of(path: Union[str, Path]) -> str:
-    h = hashlib.sha256()
-    with open(path, "rb") as f:
-        for chunk in iter(lambda: f.read(1 << 20), b""):
-            h.update(chunk)
-    return h.hexdigest()
-
-
 @dataclass
 class Card:
     """
@@ -192,48 +197,13 @@ def _card_problem(card: Card, goal_dir: Path, env_id: str) -> Optional[str]:
         return f"the card's goal {card.goal!r} is not its folder's name {goal_dir.name!r}"
     if card.env_id != env_id:
         return f"the card's env {card.env_id!r} is not its folder's {env_id!r}"
-    if card.sb3_class not in DISTRIBUTION_CLASSES.values() and card.sb3_class not in _REGISTERED:
+    if not known_algorithm(card.sb3_class):
         return f"the card names an unknown algorithm {card.sb3_class!r}"
     if not isinstance(card.env_kwargs, dict) or not all(isinstance(k, str) for k in card.env_kwargs):
         return "the card's env_kwargs are not a mapping of names"
     if not all(isinstance(v, (str, int, float, bool, type(None))) for v in card.env_kwargs.values()):
         return "the card's env_kwargs hold values other than plain numbers, strings and booleans"
     return None
-
-
-# Algorithms a card may name beyond the known ones, added by the user (``register_algorithm``).
-_REGISTERED: set[str] = set()
-
-
-def register_algorithm(path: str) -> None:
-    """
-    Let cards name another algorithm class (import path ``package.module.Class``) with a discrete action
-    distribution. Only the known SB3, sb3-contrib and sb3-disagree classes and those registered here are
-    ever imported from a card.
-    """
-    _REGISTERED.add(path)
-
-
-def algorithm_class(path: str) -> type:
-    """The algorithm class a card names: a known one or a registered one; a ZooError for anything else (a card
-    must not make this process import whatever module it names)."""
-    if path not in DISTRIBUTION_CLASSES.values() and path not in _REGISTERED:
-        raise ZooError(f"a card names the algorithm {path!r}, which is neither a known one "
-                       f"({', '.join(DISTRIBUTION_CLASSES.values())}) nor registered with "
-                       "sb3_disagree.priors.register_algorithm")
-    module, _, name = path.rpartition(".")
-    return getattr(importlib.import_module(module), name)
-
-
-def check_model_file(path: Path) -> None:
-    """Refuse what is not a readable SB3 model archive."""
-    try:
-        with zipfile.ZipFile(path) as z:
-            names = set(z.namelist())
-            if "data" not in names or z.testzip() is not None:
-                raise ZooError(f"{path} is not an SB3 model file (damaged archive or no 'data' member)")
-    except zipfile.BadZipFile as exc:
-        raise ZooError(f"{path} is not an SB3 model file: {exc}") from exc
 
 
 class Zoo:
@@ -244,16 +214,20 @@ class Zoo:
         with the package by default
     """
 
-    def __init__(self, root: Optional[Union[str, Path]] = None, trusted: Optional[Union[str, Path]] = None) -> None:
+    def __init__(self, root: Optional[Union[str, Path]] = None, trusted: Optional[Union[str, Path]] = None,
+                 write_shipped: bool = False) -> None:
         self.root = zoo_root(root)
+        self.write_shipped = write_shipped
         # A trust list kept outside the zoo (a file of SHA-256 hashes, one per line; SB3_DISAGREE_TRUSTED names
         # one for every command): where given, an entry whose model is not on it is refused before anything
         # of it is unpickled. The shipped zoo needs none.
-        trusted = trusted if trusted is not None else os.environ.get("SB3_DISAGREE_TRUSTED")
-        self.trusted: Optional[set[str]] = None
-        if trusted:
-            lines = Path(trusted).read_text().split()
-            self.trusted = {line.strip().lower() for line in lines if line.strip() and not line.startswith("#")}
+        self.trusted = trust_list(trusted)
+
+    def check_writable(self) -> None:
+        """A ZooError if this is a shipped zoo and writing to it was not asked for (``write_shipped``)."""
+        if is_shipped(self.root) and not self.write_shipped:
+            raise ZooError(f"the shipped zoo {self.root} is read-only: write to your own zoo with --zoo FOLDER (by "
+                           f"default {user_zoo()}), or pass --write-shipped to change the package's own")
 
     def entries(self, env_id: Optional[str] = None) -> list[Entry]:
         """All entries (of one env id if given), sorted; damaged ones carry their problem."""
@@ -327,13 +301,13 @@ class Zoo:
                 if not space_fits(have, space):
                     raise ZooError(f"prior {entry.goal!r} expects {kind}s {have}, the environment gives "
                                    f"{space_to_dict(space)}")
-        check_model_file(entry.model_path)
         try:
+            check_model_file(entry.model_path)
             cls = algorithm_class(card.sb3_class)
-        except (ImportError, AttributeError) as exc:
-            raise ZooError(f"prior {entry.goal!r}: cannot import {card.sb3_class}: {exc}") from exc
-        try:
-            model = cls.load(entry.model_path, device=device)
+            # Opened without unpickling what it carries unless its hash is on the trust list (sb3_disagree.loading).
+            model = load(entry.model_path, cls, device=device)
+        except ModelFileError as exc:
+            raise ZooError(f"prior {entry.goal!r}: {exc}") from None
         except Exception as exc:
             raise ZooError(f"prior {entry.goal!r}: {entry.model_path} could not be loaded: {exc}") from exc
         check_distribution(model)
@@ -350,6 +324,7 @@ class Zoo:
         evaluation: Optional[dict[str, Any]] = None,
         command: str = "",
         replace: bool = False,
+        trust: bool = False,
     ) -> Entry:
         """
         Copy a saved model into the zoo with its card, atomically.
@@ -362,10 +337,13 @@ class Zoo:
         :param evaluation: How well it does
         :param command: The command that made it
         :param replace: Whether an existing entry for this goal may be replaced
+        :param trust: Open the model file as SB3 does, unpickling what it carries (a file you made or trust);
+            otherwise a file that needs that is refused (``sb3_disagree.loading``)
         :return: The new entry
         """
         from sb3_disagree.files import safe_name
 
+        self.check_writable()
         model_path = Path(model_path)
         safe_name(goal, "the goal")
         from sb3_disagree.envs.vec import make_task
@@ -374,10 +352,16 @@ class Zoo:
             env = make_task(env_id, goal, env_kwargs)  # everything is checked before anything is written
         except ValueError as exc:
             raise ZooError(str(exc)) from None
-        check_model_file(model_path)
-        sb3_class = identify_algorithm(model_path)
+        target = self.root / env_dir_name(env_id) / goal
+        if target.exists() and not replace:  # refused before the file is opened
+            raise ZooError(f"the zoo already has a prior for {goal!r} in {env_id} (remove it first)")
+        sb3_class = "an SB3 algorithm"
         try:
-            model = algorithm_class(sb3_class).load(model_path, device="cpu")
+            check_model_file(model_path)
+            sb3_class = identify_algorithm(model_path)
+            model = load(model_path, algorithm_class(sb3_class), device="cpu", trust=trust)
+        except ModelFileError as exc:
+            raise ZooError(str(exc)) from None
         except Exception as exc:
             raise ZooError(f"{model_path} could not be loaded as {sb3_class}: {exc}") from exc
         check_distribution(model)
@@ -385,9 +369,6 @@ class Zoo:
             if not space_fits(space_to_dict(getattr(model, f"{kind}_space")), getattr(env, f"{kind}_space")):
                 raise ZooError(f"{model_path} acts on {kind}s {space_to_dict(getattr(model, f'{kind}_space'))}, but "
                                f"{env_id} gives {space_to_dict(getattr(env, f'{kind}_space'))}")
-        target = self.root / env_dir_name(env_id) / goal
-        if target.exists() and not replace:
-            raise ZooError(f"the zoo already has a prior for {goal!r} in {env_id} (remove it first)")
         card = Card(
             goal=goal, env_id=env_id, env_kwargs=dict(env_kwargs or {}),
             observation_space=space_to_dict(model.observation_space), action_space=space_to_dict(model.action_space),
@@ -423,6 +404,7 @@ class Zoo:
         :param evaluation: success_rate, episodes, mean_length, deterministic, ... of the new evaluation
         :return: The entry as read back
         """
+        self.check_writable()
         if entry.card is None or entry.problem is not None:
             raise ZooError(f"prior {entry.goal!r}: cannot record an evaluation on an unusable entry ({entry.problem})")
         if evaluation.get("deterministic"):
@@ -433,39 +415,11 @@ class Zoo:
         return self._read(entry.path, entry.env_id)
 
     def remove(self, goal: str, env_id: str) -> None:
+        self.check_writable()
         entry = self.get(goal, env_id)
         trash = entry.path.with_name(f".{entry.path.name}-removed")
         os.replace(entry.path, trash)
         shutil.rmtree(trash)
-
-
-def identify_algorithm(model_path: Path) -> str:
-    """
-    Which supported algorithm saved a model file, read from the file's own record of its policy class
-    and hyperparameters (PPO and A2C share SB3's ActorCriticPolicy; PPO records a clip range).
-
-    :return: Import path of the algorithm class
-    """
-    with zipfile.ZipFile(model_path) as z:
-        data = json.loads(z.read("data"))
-    policy_module = str(data.get("policy_class", {}).get("__module__", ""))
-    if policy_module.startswith("sb3_disagree."):
-        name = "ACER"
-    elif policy_module.startswith("sb3_contrib.common.maskable"):
-        name = "MaskablePPO"
-    elif policy_module == "stable_baselines3.common.policies" and "cg_max_steps" in data:
-        name = "TRPO"
-    elif policy_module == "stable_baselines3.common.policies" and "clip_range" in data:
-        name = "PPO"
-    elif policy_module == "stable_baselines3.common.policies":
-        name = "A2C"
-    else:
-        raise ZooError(
-            f"{model_path} was saved with a policy from {policy_module or 'an unknown module'}: a prior must come from "
-            f"an algorithm with a discrete action distribution ({', '.join(DISTRIBUTION_CLASSES)}); DQN, SAC, TD3 "
-            "and DDPG models have none"
-        )
-    return DISTRIBUTION_CLASSES[name]
 
 
 def check_distribution(model: Any) -> None:

@@ -40,6 +40,9 @@ DOPT_TRAIN_FRAME_STACK = 3
 DOPT_TRAIN_VALIDATION = 40
 
 
+MAX_STEPS = 10**9  # a budget beyond this is a typo: a billion env steps is weeks on the machines this runs on
+
+
 def acer_defaults(mode: str) -> dict[str, Any]:
     """ACER's settings for a mode when a run names none: ``ACER_KWARGS`` with the mode's own on top."""
     return {**ACER_KWARGS, **MODE_ACER_KWARGS.get(mode, {})}
@@ -171,8 +174,11 @@ class RunConfig:
             raise ValueError(f"--beta must be >= 0 (the priors are followed while disagreement is below it), got {self.beta}")
         if self.alpha < 1:
             raise ValueError(f"--alpha must be >= 1, got {self.alpha}")
-        if self.steps < 1 or self.n_envs < 1:
-            raise ValueError("--steps and --n-envs must be positive")
+        if not 1 <= self.steps <= MAX_STEPS or not 1 <= self.n_envs <= 256:
+            raise ValueError(f"--steps must be between 1 and {MAX_STEPS:,} and --n-envs between 1 and 256, got "
+                             f"{self.steps:,} and {self.n_envs}")
+        if not 0 <= self.seed < 2**32:
+            raise ValueError(f"--seed must be between 0 and 2**32 - 1 (numpy's seeds), got {self.seed}")
         if self.vec_env not in ("dummy", "subproc"):
             raise ValueError(f"--vec-env must be dummy or subproc, got {self.vec_env!r}")
         if self.init not in ("scratch", "prior"):
@@ -222,6 +228,10 @@ class RunConfig:
             if given:
                 flags = ", ".join("--" + k.replace("_", "-") for k in given)
                 raise ValueError(f"{flags}: settings of ACER; --mode ppo trains SB3's PPO without them")
+        unknown = sorted(set(self.acer_kwargs) - acer_parameters())
+        if unknown:
+            raise ValueError(f"unknown ACER settings {', '.join(map(str, unknown))}: ACER takes "
+                             f"{', '.join(sorted(acer_parameters()))}")
         reward_scale = self.acer_kwargs.get("reward_scale", 1.0)
         if isinstance(reward_scale, bool) or not isinstance(reward_scale, (int, float)) or not reward_scale > 0:
             raise ValueError(f"--reward-scale must be a number > 0, got {reward_scale!r}")
@@ -260,6 +270,16 @@ class RunConfig:
 
     def run_dir(self, out: Path) -> Path:
         return out / self.env_id.replace("/", "__") / self.goal / f"{self.mode}-{self.seed}"
+
+
+def acer_parameters() -> set[str]:
+    """The keyword arguments ACER takes beyond the policy, the env and what a run sets itself."""
+    import inspect
+
+    from sb3_disagree.acer import ACER
+
+    return set(inspect.signature(ACER.__init__).parameters) - {"self", "policy", "env", "behaviour", "seed", "overlap",
+                                                                "kwargs", "_init_setup_model", "device"}
 
 
 def image_observations(env_id: str) -> bool:

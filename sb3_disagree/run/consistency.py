@@ -42,7 +42,7 @@ def greedy_validation(model: Any, config: dict[str, Any], episodes: int) -> Call
 
 def refine_run(run_dir: Path, rounds: int = 3, steps: int = 20_000, epochs: int = 3, learning_rate: float = 3e-4,
                episodes: int = 100, force: bool = False, name: str = FOLDER,
-               on_round: Optional[Callable[[RoundStats], None]] = None, sampling: str = "loops") -> dict[str, Any]:
+               on_round: Optional[Callable[[RoundStats], None]] = None, sampling: str = "loops", trust: bool = False) -> dict[str, Any]:
     """
     Run the greedy-consistency phase (:func:`~sb3_disagree.acer.consistency.greedy_consistency`) on a finished
     ACER run's ``model.zip``, on env seeds of its own (the run's seed + ``CONSISTENCY_SEED_OFFSET``), and write the
@@ -59,6 +59,7 @@ def refine_run(run_dir: Path, rounds: int = 3, steps: int = 20_000, epochs: int 
     :param name: The folder inside the run that the refined model goes to
     :param on_round: Called with each round's statistics
     :param sampling: Where the collection samples: "loops" (greedy elsewhere) or "always"
+    :param trust: Open the run's model as SB3 does, unpickling what it carries (``load_run``)
     :return: The result written to ``consistent/result.json``
     """
     run_dir = Path(run_dir)
@@ -70,7 +71,7 @@ def refine_run(run_dir: Path, rounds: int = 3, steps: int = 20_000, epochs: int 
     if rounds < 1 or epochs < 1 or steps < 4 or learning_rate <= 0 or episodes < 0:
         raise ValueError(f"--rounds and --epochs must be >= 1, --steps >= 4 (one per env), --learning-rate > 0 and "
                          f"--episodes >= 0, got {rounds}, {epochs}, {steps}, {learning_rate} and {episodes}")
-    config, model = load_run(run_dir)
+    config, model = load_run(run_dir, trust)
     if not isinstance(model, ACER):
         raise ValueError("the greedy-consistency phase refines an ACER policy; this run trained PPO")
     env = consistency_env(config)

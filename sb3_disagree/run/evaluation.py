@@ -15,7 +15,7 @@ from sb3_disagree.evaluation import evaluate
 from sb3_disagree.priors.zoo import space_fits, space_to_dict
 from sb3_disagree.run.config import RunConfig
 from sb3_disagree.run.envs import build_env
-from sb3_disagree.run.models import algorithm_of
+from sb3_disagree.run.models import algorithm_of, load_model
 
 class EvaluateAlone(BaseCallback):
     """
@@ -129,7 +129,7 @@ def evaluate_alone(model: Any, config: dict[str, Any], episodes: int, determinis
 
 
 def evaluate_run(path: Path, episodes: int = 100, seed: Optional[int] = None,
-                 labels: Sequence[str] = ("greedy", "sampled")) -> tuple[dict[str, Any], dict[str, Any]]:
+                 labels: Sequence[str] = ("greedy", "sampled"), trust: bool = False) -> tuple[dict[str, Any], dict[str, Any]]:
     """
     A trained run's policy alone, loaded from its folder (or its ``model.zip``) as a user would load it.
 
@@ -137,30 +137,65 @@ def evaluate_run(path: Path, episodes: int = 100, seed: Optional[int] = None,
     :param episodes: Episodes each way
     :param seed: Env seed of the first env (default: the run's seed + ``FINAL_EVAL_SEED_OFFSET``)
     :param labels: "greedy" and/or "sampled"
+    :param trust: Unpickle the model file as SB3 does (``load_run``)
     :return: The run's configuration and the :class:`~sb3_disagree.evaluation.Evaluation` by label
     """
-    config, model = load_run(path)
+    config, model = load_run(path, trust)
     return config, evaluate_both(model, config, episodes, seed, tuple(labels))
 
 
-def load_run(path: Path) -> tuple[dict[str, Any], Any]:
+def load_run(path: Path, trust: bool = False) -> tuple[dict[str, Any], Any]:
     """
-    A trained run's configuration and model, as a user would load it.
+    A trained run's configuration and model, as a user would load it, without unpickling what the model file
+    carries unless trusted (``sb3_disagree.loading``).
 
     :param path: A run folder, or a ``model.zip`` with the run's ``config.yaml`` beside it
-    :return: The configuration (``config.yaml``) and the model, loaded on the CPU with its algorithm's ``load``
+    :param trust: Unpickle the model file as SB3 does (a file you made or whose source you trust)
+    :return: The configuration (``config.yaml``) and the model, loaded on the CPU
     """
+    from sb3_disagree.loading import ModelFileError
+
     path = Path(path)
     run_dir = path if path.is_dir() else path.parent
     model_path = path / "model.zip" if path.is_dir() else path
-    if not model_path.exists():
+    if not model_path.is_file():
         raise FileNotFoundError(f"no model at {model_path}")
-    cfg_path = run_dir / "config.yaml"
-    if not cfg_path.exists():
-        raise FileNotFoundError(f"{cfg_path} is missing: it names the environment and goal to evaluate in")
-    config = yaml.safe_load(cfg_path.read_text())
-    algorithm = algorithm_of(config.get("mode", "disagreement"))
+    config = read_config(run_dir)
     try:
-        return config, algorithm.load(model_path, device="cpu")
+        return config, load_model(config, model_path, device="cpu", trust=trust)
+    except ModelFileError:
+        raise
     except Exception as exc:  # a damaged file, or another algorithm's
-        raise ValueError(f"{model_path} could not be loaded as {algorithm.__name__}: {exc}") from None
+        raise ValueError(f"{model_path} could not be loaded as {algorithm_of(config['mode']).__name__}: "
+                         f"{str(exc).splitlines()[0] if str(exc) else type(exc).__name__}") from None
+
+
+def read_config(run_dir: Path) -> dict[str, Any]:
+    """
+    A run's saved configuration (``config.yaml``), checked to be a mapping that names a registered env, a goal and a
+    mode: a ValueError in one line for anything else.
+    """
+    from sb3_disagree.options import MODES
+
+    path = Path(run_dir) / "config.yaml"
+    if not path.is_file():
+        raise FileNotFoundError(f"{Path(run_dir)} is not a run folder: it has no config.yaml (the run's environment, "
+                                "goal and settings)")
+    try:
+        config = yaml.safe_load(path.read_text())
+    except (yaml.YAMLError, UnicodeDecodeError) as exc:
+        raise ValueError(f"{path} is not readable YAML ({str(exc).splitlines()[0]})") from None
+    if not isinstance(config, dict):
+        raise ValueError(f"{path} does not hold a run's settings (a mapping)")
+    for key in ("env_id", "goal"):
+        if not isinstance(config.get(key), str):
+            raise ValueError(f"{path} names no {key} (a word): it is not a run's config.yaml")
+    config.setdefault("mode", "disagreement")
+    if config["mode"] not in MODES:
+        raise ValueError(f"{path} names the mode {config['mode']!r}, not one of {', '.join(MODES)}")
+    if not isinstance(config.get("env_kwargs") or {}, dict):
+        raise ValueError(f"{path}: env_kwargs must be a mapping")
+    from sb3_disagree.envs.vec import check_env_id
+
+    check_env_id(config["env_id"])
+    return config

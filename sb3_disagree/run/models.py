@@ -1,5 +1,6 @@
 """The model a run trains: ACER in the run's mode (from a prior's weights, with distillation, ...) or PPO."""
 
+from pathlib import Path
 from typing import Optional
 
 from sb3_disagree.acer import ACER
@@ -17,6 +18,34 @@ def algorithm_of(mode: str) -> type:
     return ACER
 
 
+def ppo_schedules() -> dict:
+    """PPO's learning rate and clip range as the "ppo" mode trains with them: ``PPO_KWARGS``' values falling linearly
+    to 0 over the budget (rl-zoo3's "lin_" values)."""
+    lr, clip = PPO_KWARGS["learning_rate"], PPO_KWARGS["clip_range"]
+    return dict(learning_rate=lambda p: p * lr, clip_range=lambda p: p * clip)
+
+
+def load_model(config: dict, path: Path, env=None, behaviour=None, device: str = "auto", trust: bool = False):
+    """
+    A run's saved model, opened without unpickling what the file carries (``sb3_disagree.loading``) unless
+    trusted: PPO's schedules come from the mode's settings, ACER's from its plain fields.
+
+    :param config: The run's saved configuration (``config.yaml``)
+    :param path: Its model file (``model.zip``, or a checkpoint's)
+    :param env: Envs to continue training in
+    :param behaviour: ACER's behaviour to continue training with
+    :param device: Torch device
+    :param trust: Unpickle the file as SB3 does
+    """
+    from sb3_disagree.loading import load
+
+    mode = config.get("mode", "disagreement")
+    if mode == "ppo":
+        return load(path, algorithm_of(mode), env=env, device=device, trust=trust, schedules=ppo_schedules())
+    return load(path, ACER, env=env, device=device, trust=trust, behaviour=behaviour,
+                overlap=bool(config.get("overlap", False)))
+
+
 def new_model(config: RunConfig, env, behaviour, priors: Optional[PriorSet]):
     """The model a new run trains: ACER with the run's settings (from a prior's weights for "finetune", with
     kickstarting's distillation for "kickstart"), or SB3's PPO with ``PPO_KWARGS`` for "ppo"."""
@@ -24,10 +53,8 @@ def new_model(config: RunConfig, env, behaviour, priors: Optional[PriorSet]):
     if config.mode == "ppo":
         from stable_baselines3 import PPO
 
-        kwargs = dict(PPO_KWARGS)
-        lr, clip = kwargs.pop("learning_rate"), kwargs.pop("clip_range")
-        return PPO(policy, env, seed=config.seed, learning_rate=lambda p: p * lr, clip_range=lambda p: p * clip,
-                   **kwargs)
+        kwargs = {k: v for k, v in PPO_KWARGS.items() if k not in ("learning_rate", "clip_range")}
+        return PPO(policy, env, seed=config.seed, **ppo_schedules(), **kwargs)
     acer_kwargs = dict(config.acer_kwargs)
     if config.mode == "kickstart":
         acer_kwargs = {**KICKSTART, **acer_kwargs}

@@ -8,7 +8,6 @@ tags). A run survives what stops it (``sb3_disagree.checkpoints``); a resumed ru
 and its history (monitor files, ``progress.csv``, ``evaluations.npz``), so its curves read as one run.
 """
 
-import os
 import pickle
 import shutil
 import time
@@ -25,22 +24,22 @@ from sb3_disagree.acer import ACER
 from sb3_disagree.behaviour import GreedyPhase, OnPolicyBehaviour
 from sb3_disagree.acer.consistency import HarvestLabels, RoundStats, greedy_consistency
 from sb3_disagree.allocator import keep_freed_memory
-from sb3_disagree.checkpoints import (Checkpoint, latest_checkpoint, replace_model, save_checkpoint,
+from sb3_disagree.checkpoints import (BUFFER, Checkpoint, replace_model, resume_point, save_checkpoint,
                                       sigterm_as_interrupt, truncate_logs)
 from sb3_disagree.files import write_atomic
 from sb3_disagree.options import PriorSet, make_options
 from sb3_disagree.priors.select import choose_priors, guide_horizon
 from sb3_disagree.run.config import RunConfig, acer_defaults
 from sb3_disagree.run.envs import build_env
-from sb3_disagree.run.evaluation import EvaluateAlone
+from sb3_disagree.run.evaluation import EvaluateAlone, read_config
 from sb3_disagree.run.logs import run_logger
-from sb3_disagree.run.models import algorithm_of, new_model
+from sb3_disagree.run.models import load_model, new_model
 from sb3_disagree.run.trajectories import RecordTrajectories
 
 def train(config: RunConfig, out: Path = Path("runs"), resume: Optional[Path] = None,
           callbacks: Optional[list[BaseCallback]] = None, on_priors: Optional[Callable[[list, list], None]] = None,
           run_dir: Optional[Path] = None, steps: Optional[int] = None, force: bool = False,
-          on_round: Optional[Callable[[RoundStats], None]] = None) -> tuple[Path, ACER, bool]:
+          on_round: Optional[Callable[[RoundStats], None]] = None, trust: bool = False) -> tuple[Path, ACER, bool]:
     """
     Train a new policy with the method (or from scratch, or a peer method), writing the run folder.
 
@@ -58,28 +57,33 @@ def train(config: RunConfig, out: Path = Path("runs"), resume: Optional[Path] = 
     :param force: Replace an existing run in the folder (without it, an existing run is an error)
     :param on_round: Called with each round's statistics of the greedy-consistency phase
         (``config.consistency_rounds``), which follows a finished training; ``model.zip`` is then its policy
+    :param trust: Open a resumed run's saved model, or an embedding saved as a pickle, as SB3 and gensim do,
+        unpickling what they carry (files you made); otherwise models are opened without (``sb3_disagree.loading``)
+        and pickled embeddings refused
     :return: The run folder, the model, and whether training (and the phase) finished (False when interrupted)
     """
     keep_freed_memory()  # 14% more env steps/s here: no page faults for each step's few-MB blocks
     checkpoint, saved = None, {}
     if resume is not None:
         run_dir = Path(resume)
-        if not (run_dir / "config.yaml").exists() or not (run_dir / "model.zip").exists():
+        if not (run_dir / "model.zip").is_file():
             raise FileNotFoundError(f"{run_dir} is not a run folder with config.yaml and model.zip to resume")
-        saved = yaml.safe_load((run_dir / "config.yaml").read_text())
+        saved = read_config(run_dir)
         config = RunConfig.of_saved(saved)
-        checkpoint = latest_checkpoint(run_dir)
-        done = checkpoint[1]["num_timesteps"] if checkpoint else int(saved.get("num_timesteps") or 0)
+        checkpoint = resume_point(run_dir)
+        done = int(checkpoint[1]["num_timesteps"])
         if steps is not None:  # a finished run continues to a larger budget
             if steps < done:
                 raise ValueError(f"--steps {steps} is below the {done:,} steps {run_dir} has already trained")
             config.steps = steps
+            # The greedy phase is the budget's last steps: a budget cut below it is greedy throughout, as a new run
+            # with a harvest longer than its budget is.
+            config.greedy_phase = min(config.greedy_phase, steps)
         phase = saved.get("consistency") or {}
         if saved.get("finished") and done >= config.steps and phase.get("num_timesteps") == done:
             # Trained and refined to this budget already: model.zip is the refined policy, nothing to redo.
-            return run_dir, _load(config, run_dir / "model.zip", run_dir), True
-        if checkpoint is not None:  # the history continues from the checkpoint: what came after it is cut
-            truncate_logs(run_dir, checkpoint[1]["logs"])
+            return run_dir, _load(config, run_dir / "model.zip", run_dir, trust=trust), True
+        truncate_logs(run_dir, checkpoint[1]["logs"])  # the history continues from the checkpoint
     config.validate()
     run_dir = Path(resume or run_dir or config.run_dir(Path(out)))
     if resume is None and run_dir.exists() and any(run_dir.iterdir()):
@@ -97,7 +101,7 @@ def train(config: RunConfig, out: Path = Path("runs"), resume: Optional[Path] = 
         behaviour, prior_names, sims, priors = None, [], [], None
         if config.mode not in ("scratch", "ppo"):
             prior_names, sims, models = choose_priors(config.goal, config.env_id, env, config.priors, config.zoo,
-                                                      config.embedding)
+                                                      config.embedding, trust=trust)
             priors = PriorSet(models)
             if on_priors:
                 on_priors(prior_names, sims)
@@ -110,7 +114,7 @@ def train(config: RunConfig, out: Path = Path("runs"), resume: Optional[Path] = 
                                     config.greedy_epsilon)
         saved_config = dict(asdict(config), chosen_priors=prior_names, similarities=sims)
         if resume is not None:
-            model = _resumed_model(config, run_dir, env, behaviour, checkpoint)
+            model = _resumed_model(config, run_dir, env, behaviour, checkpoint, trust)
             remaining = max(config.steps - model.num_timesteps, 0)
         else:
             model = new_model(config, env, behaviour, priors)
@@ -145,8 +149,6 @@ def train(config: RunConfig, out: Path = Path("runs"), resume: Optional[Path] = 
         save_checkpoint(model, run_dir, with_buffer=not finished)
         saved_config.update(num_timesteps=int(model.num_timesteps), finished=finished)
         write_atomic(run_dir / "config.yaml", yaml.safe_dump(saved_config, sort_keys=False))
-    if (run_dir / "replay_buffer.pkl").exists():  # left by a version that kept it beside the model
-        os.remove(run_dir / "replay_buffer.pkl")
     env.close()
     if finished and (config.consistency_rounds or harvest is not None):
         model, finished = _refine(config, run_dir, model, saved_config, on_round, harvest)
@@ -173,7 +175,7 @@ def _refine(config: RunConfig, run_dir: Path, model: ACER, saved_config: dict,
                                          config.consistency_epochs, seed=config.seed, on_round=on_round,
                                          harvest=harvest, validate=validate)
     except KeyboardInterrupt:  # the weights are half fitted: hand back the trained policy that model.zip holds
-        return _load(config, run_dir / "model.zip", run_dir), False
+        return _load(config, run_dir / "model.zip", run_dir, trust=True), False  # the file this run just wrote
     finally:
         if env is not None:
             env.close()
@@ -202,10 +204,7 @@ def check_resume(config: RunConfig, resume: Path, force: bool = False) -> None:
     """
     if force:
         raise ValueError("--force replaces a run and --resume continues one: choose one")
-    saved_path = Path(resume) / "config.yaml"
-    if not saved_path.exists():
-        raise FileNotFoundError(f"{resume} is not a run folder with config.yaml and model.zip to resume")
-    saved = yaml.safe_load(saved_path.read_text())
+    saved = read_config(Path(resume))
     if saved.get("goal") != config.goal:
         raise ValueError(f"{resume} trains the goal {saved.get('goal')!r}, not {config.goal!r}")
     defaults = RunConfig(goal=config.goal)
@@ -221,26 +220,25 @@ def check_resume(config: RunConfig, resume: Path, force: bool = False) -> None:
         raise ValueError(f"--resume continues {resume} with its saved settings; drop {flags}")
 
 
-def _load(config: RunConfig, path: Path, run_dir: Path, env=None, behaviour=None):
+def _load(config: RunConfig, path: Path, run_dir: Path, env=None, behaviour=None, trust: bool = False):
     """A run's saved model (with its envs and behaviour, to continue training), or a one-line error if damaged."""
+    from sb3_disagree.loading import ModelFileError
+
     try:
-        if config.mode == "ppo":
-            return algorithm_of(config.mode).load(path, env=env)
-        return ACER.load(path, env=env, behaviour=behaviour, overlap=config.overlap)
-    except (EOFError, OSError, ValueError, zipfile.BadZipFile, pickle.UnpicklingError) as exc:
+        return load_model(asdict(config), path, env=env, behaviour=behaviour, trust=trust)
+    except ModelFileError:
+        raise
+    except (EOFError, OSError, ValueError, KeyError, zipfile.BadZipFile, pickle.UnpicklingError) as exc:
         raise ValueError(f"{run_dir} cannot be resumed: its saved model is damaged ({exc})") from None
 
 
-def _resumed_model(config: RunConfig, run_dir: Path, env, behaviour, checkpoint):
-    """The model a resumed run continues: from its newest complete checkpoint (with the replay buffer it kept),
-    else from ``model.zip`` (and a ``replay_buffer.pkl`` beside it, as earlier versions left them)."""
-    folder = checkpoint[0] if checkpoint else run_dir
-    model = _load(config, folder / "model.zip", run_dir, env, behaviour)
-    try:
-        if (folder / "replay_buffer.pkl").exists() and isinstance(model, ACER):
-            model.load_replay_buffer(folder / "replay_buffer.pkl")
-    except (EOFError, OSError, ValueError, zipfile.BadZipFile, pickle.UnpicklingError) as exc:
-        raise ValueError(f"{run_dir} cannot be resumed: its saved model or replay buffer is damaged ({exc})") from None
+def _resumed_model(config: RunConfig, run_dir: Path, env, behaviour, checkpoint, trust: bool = False):
+    """The model a resumed run continues: from its newest intact checkpoint, with the replay buffer it kept."""
+    folder = checkpoint[0]
+    model = _load(config, folder / "model.zip", run_dir, env, behaviour, trust)
+    if (folder / BUFFER).exists() and isinstance(model, ACER):
+        try:
+            model.load_replay_buffer(folder / BUFFER)
+        except (OSError, ValueError) as exc:
+            raise ValueError(f"{run_dir} cannot be resumed: its replay buffer is damaged ({exc})") from None
     return model
-
-
