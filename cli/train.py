@@ -57,8 +57,6 @@ def _run_options() -> list:
              "consistency_harvest": "model.zip is fitted to the loop-free paths of the successful episodes of the "
                                     f"last this many training steps, no env step more (default: {DOPT_TRAIN_HARVEST} for "
                                     "--mode kickstart, 0 (off) for the others)",
-             "consistency_harvest_average": "Over the harvest the new policy acts by the moving average of its "
-                                            "weights, what model.zip acts with (default: off, the current weights)",
              "greedy_phase": "The last this many env steps act by the new policy's argmax, --greedy-epsilon of its "
                              "samples (default: the harvest's steps for a new --mode kickstart run, else 0)",
              "consistency_validation": "Each greedy-consistency fit (the harvest's) is validated after every "
@@ -73,9 +71,7 @@ def _run_options() -> list:
                         types={"goal": Optional[str], "priors": str, "steps": Optional[int], "consistency_harvest": Optional[int],
                                "frame_stack": Optional[int], "loop_flags": Optional[bool],
                                "greedy_phase": Optional[int], "consistency_validation": Optional[int]},
-                        flags={"env_id": "--env", "consistency_harvest_average":
-                               "--consistency-harvest-average/--no-consistency-harvest-average",
-                               "loop_flags": "--loop-flags/--no-loop-flags"}, helps=helps,
+                        flags={"env_id": "--env", "loop_flags": "--loop-flags/--no-loop-flags"}, helps=helps,
                         # dopt train overlaps the replay updates (faster on two cores); --no-overlap for the
                         # sequential loop the experiments use. It fits model.zip to the loop-free paths of its own
                         # last episodes, acted greedily by the current weights (DOPT_TRAIN_HARVEST); None: resolved in
@@ -169,7 +165,7 @@ def _default_harvest(options: dict, resume: Optional[Path], budget: int) -> None
     if options["greedy_phase"] is None:
         options["greedy_phase"] = min(options["consistency_harvest"], budget) if new_kickstart else 0
     if options["consistency_validation"] is None:
-        fitted = options["consistency_harvest"] or options["consistency_rounds"]
+        fitted = options["consistency_harvest"]
         options["consistency_validation"] = DOPT_TRAIN_VALIDATION if new_kickstart and fitted else 0
 
 

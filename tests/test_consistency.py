@@ -299,7 +299,7 @@ def test_dopt_train_refines_model_zip_when_asked_and_resume_keeps_it(tmp_path, m
         with th.no_grad():
             for p in model.policy.acting_net.parameters():
                 p.add_(0.1)
-        history = [RoundStats(steps, 3, 2, 10, 0.5, 0.9) for _ in range(rounds)]
+        history = [RoundStats(0, 3, 2, 10, 0.5, 0.9)]  # the harvest's fit: no env step more
         for stats in history:
             on_round(stats)
         return history
@@ -309,17 +309,12 @@ def test_dopt_train_refines_model_zip_when_asked_and_resume_keeps_it(tmp_path, m
     monkeypatch.setattr(sys.modules["sb3_disagree.run.train"], "greedy_consistency", shifting_phase)
     base = ["train", "--goal", "bathtub", "--env", "sb3_disagree/ApartmentState-v0", "--mode", "scratch", "--steps",
             "200", "--n-envs", "2", "--card-episodes", "2", "--out", str(tmp_path)]
-    for bad in (["--consistency-rounds", "-1"], ["--consistency-rounds", "1", "--consistency-steps", "2"],
-                ["--mode", "ppo", "--consistency-rounds", "1"]):
-        result = runner.invoke(app, [*base, *bad])
-        assert result.exit_code == 2 and "--consistency-" in result.output and not list(tmp_path.iterdir())
-    result = runner.invoke(app, [*base, "--consistency-rounds", "2", "--consistency-steps", "4000"])
+    result = runner.invoke(app, [*base, "--consistency-harvest", "200"])
     assert result.exit_code == 0, result.output
-    assert result.output.count("greedy consistency, a round: 4,000 env steps") == 2
-    assert "done: 200 steps of training and 8,000 of the greedy-consistency phase" in result.output
+    assert result.output.count("greedy consistency, the training's last episodes") == 1
     (run_dir,) = tmp_path.glob("*/bathtub/scratch-0")
     phase = yaml.safe_load((run_dir / "config.yaml").read_text())["consistency"]
-    assert phase["num_timesteps"] == 200 and phase["env_steps"] == 8000 and len(phase["per_round"]) == 2
+    assert phase["num_timesteps"] == 200 and phase["env_steps"] == 0 and len(phase["per_round"]) == 1
     (checkpoint,) = (run_dir / "checkpoints").iterdir()
     trained, refined = ACER.load(checkpoint / "model.zip"), ACER.load(run_dir / "model.zip")
     obs = np.random.default_rng(0).uniform(-1, 1, (64, 4)).astype(np.float32)
@@ -331,7 +326,7 @@ def test_dopt_train_refines_model_zip_when_asked_and_resume_keeps_it(tmp_path, m
     assert "greedy consistency" not in again.output and (run_dir / "model.zip").read_bytes() == before
 
 
-def test_an_interrupted_phase_leaves_the_trained_model_and_resume_redoes_it(tmp_path, monkeypatch):
+def test_an_interrupted_fit_leaves_the_trained_model(tmp_path, monkeypatch):
     import sb3_disagree.run  # noqa: F401
 
     module = sys.modules["sb3_disagree.run.train"]
@@ -343,7 +338,7 @@ def test_an_interrupted_phase_leaves_the_trained_model_and_resume_redoes_it(tmp_
 
     monkeypatch.setattr(module, "greedy_consistency", interrupted)
     args = ["train", "--goal", "bathtub", "--env", "sb3_disagree/ApartmentState-v0", "--mode", "scratch", "--steps",
-            "200", "--n-envs", "2", "--card-episodes", "0", "--out", str(tmp_path), "--consistency-rounds", "1"]
+            "200", "--n-envs", "2", "--card-episodes", "0", "--out", str(tmp_path), "--consistency-harvest", "200"]
     result = runner.invoke(app, args)
     (run_dir,) = tmp_path.glob("*/bathtub/scratch-0")
     assert result.exit_code == 130 and "interrupted in the greedy-consistency phase" in result.output
@@ -351,16 +346,7 @@ def test_an_interrupted_phase_leaves_the_trained_model_and_resume_redoes_it(tmp_
     assert saved["finished"] and "consistency" not in saved
     (checkpoint,) = (run_dir / "checkpoints").iterdir()
     assert (checkpoint / "model.zip").read_bytes() == (run_dir / "model.zip").read_bytes()  # the trained policy
-
-    def phase(model, env, rounds, steps, epochs=3, seed=0, on_round=None, harvest=None, validate=None):
-        calls.append("done")
-        return [RoundStats(steps, 1, 1, 1, 0.0, 1.0)]
-
-    monkeypatch.setattr(module, "greedy_consistency", phase)
-    again = runner.invoke(app, ["train", "--goal", "bathtub", "--resume", str(run_dir), "--card-episodes", "0"])
-    assert again.exit_code == 0, again.output
-    assert calls == ["interrupted", "done"]
-    assert yaml.safe_load((run_dir / "config.yaml").read_text())["consistency"]["env_steps"] == 20_000
+    assert calls == ["interrupted"]
 
 
 def _probs(model, obs):
@@ -372,7 +358,7 @@ def test_dopt_train_fits_model_zip_to_the_harvest_of_its_own_episodes(tmp_path):
     base = ["train", "--goal", "bathtub", "--env", "sb3_disagree/ApartmentState-v0", "--mode", "scratch", "--steps",
             "600", "--n-envs", "2", "--card-episodes", "0", "--out", str(tmp_path)]
     for bad in (["--consistency-harvest", "-1"],
-                ["--mode", "ppo", "--consistency-harvest", "100"], ["--consistency-harvest-average"],
+                ["--mode", "ppo", "--consistency-harvest", "100"], ["--consistency-validation", "5"],
                 ["--consistency-harvest", "100", "--consistency-epochs", "0"]):
         result = runner.invoke(app, [*base, *bad])
         assert result.exit_code == 2 and "--consistency-" in result.output and not list(tmp_path.iterdir())
@@ -426,71 +412,6 @@ def test_dopt_train_validates_the_harvest_fit_epoch_by_epoch(tmp_path):
         assert fit["validation"][int(fit["epoch"]) - 1] == max(fit["validation"])
     else:  # no episode reached the goal: nothing was fitted, nothing validated
         assert "validation" not in fit
-
-
-class _RecordProbs(BaseCallback):
-    """Per step: the behaviour's probabilities, and those of the current and the averaged weights on its input."""
-
-    def _on_training_start(self) -> None:
-        self.rows = []
-
-    def _on_step(self) -> bool:
-        policy, obs = self.model.policy, self.locals["obs_tensor"]
-        with th.no_grad():
-            rows = (self.locals["probs"], policy.action_probs(obs), policy.get_distribution(obs).distribution.probs)
-        self.rows.append((self.num_timesteps, *(r.numpy().copy() for r in rows)))
-        return True
-
-
-def test_harvest_from_the_average_acts_by_the_weights_model_zip_acts_with():
-    env = make_vec_env(TurnEnv, n_envs=4, seed=3)
-    model = ACER("MlpPolicy", env, seed=0, n_steps=10, ema_decay=0.9, replay_start=40, learning_rate=0.01,
-                 policy_kwargs=dict(net_arch=[32]))
-    record = _RecordProbs()
-    model.learn(1200, callback=[HarvestLabels(start=800, from_average=True), record])
-    late = [r for r in record.rows if r[0] > 804]  # from the step after the harvest's first
-    early = [r for r in record.rows if 200 < r[0] <= 800]
-    assert all(np.allclose(probs, average) for _, probs, _, average in late)
-    assert all(np.allclose(probs, current) for _, probs, current, _ in early)
-    assert any(not np.allclose(current, average, atol=1e-3) for _, _, current, average in late)  # they differ
-    assert not model.act_with_average  # only during the harvest
-
-
-class _RecordWeights(BaseCallback):
-    """At each rollout's start: the env steps so far and a copy of the policy's weights."""
-
-    def _on_training_start(self) -> None:
-        self.rows = []
-
-    def _on_rollout_start(self) -> None:
-        weights = th.nn.utils.parameters_to_vector(self.model.policy.parameters()).detach().clone()
-        self.rows.append((self.num_timesteps, weights))
-
-    def _on_step(self) -> bool:
-        return True
-
-
-@pytest.mark.parametrize("overlap", [False, True])
-def test_a_frozen_harvest_collects_without_updates(overlap):
-    env = make_vec_env(TurnEnv, n_envs=4, seed=3)
-    model = ACER("MlpPolicy", env, seed=0, n_steps=10, replay_start=40, learning_rate=0.01, overlap=overlap,
-                 policy_kwargs=dict(net_arch=[32]))
-    harvest, record = HarvestLabels(start=800, frozen=True), _RecordWeights()
-    model.learn(1400, callback=[harvest, record])
-    final = th.nn.utils.parameters_to_vector(model.policy.parameters()).detach()
-    before = [w for steps, w in record.rows if steps < 800]
-    # The segment that crosses the start (800-840) is collected frozen; what was earned before it (with overlap,
-    # replay updates still pending) is learned at its end, and the weights are fixed from the next one on.
-    after = [w for steps, w in record.rows if steps >= 840]
-    assert len(after) >= 10 and all(th.equal(w, final) for w in after)
-    assert not th.equal(before[-2], before[-1])  # they did learn before the harvest
-    assert harvest.trails.episodes > 0 and not model.updates_frozen  # it collected; frozen only during the harvest
-
-
-def test_dopt_train_frozen_harvest_needs_a_harvest(tmp_path):
-    result = runner.invoke(app, ["train", "--goal", "bathtub", "--env", "sb3_disagree/ApartmentState-v0", "--mode",
-                                 "scratch", "--steps", "600", "--consistency-harvest-frozen", "--out", str(tmp_path)])
-    assert result.exit_code == 2 and "--consistency-harvest-frozen" in result.output and not list(tmp_path.iterdir())
 
 
 def test_dopt_train_fits_the_harvest_for_the_epochs_asked(tmp_path, monkeypatch):

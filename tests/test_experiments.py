@@ -406,7 +406,7 @@ def test_shipped_grids_still_make_their_committed_runs():
             assert {**acer, **saved["acer_kwargs"]} == {**acer, **now["acer_kwargs"]}, (experiment.name, run.cell)
             assert saved["mode"] == now["mode"] and saved.get("frame_stack", 1) == now["frame_stack"]
             compared += 1
-    assert compared > 200
+    assert compared >= 170  # the grids behind the results page
 
 
 def test_the_policy_alone_table_reads_greedy_and_sampled_at_each_evaluation():

@@ -353,3 +353,25 @@ def test_ctrl_c_while_the_command_starts_is_one_line():
     out, err = process.communicate(timeout=120)
     lines = [line for line in err.splitlines() if line.strip()]
     assert process.returncode == 130 and lines == ["error: interrupted"], (process.returncode, err[-2000:])
+
+
+def test_a_budget_cut_on_resume_keeps_the_greedy_phase_inside_it(tmp_path):
+    """A run whose greedy phase covered its whole budget, resumed to a smaller one, is greedy throughout it."""
+    from stable_baselines3.common.callbacks import BaseCallback
+
+    from sb3_disagree.run import RunConfig, train
+
+    class Interrupt(BaseCallback):
+        def _on_step(self):
+            if self.num_timesteps >= 200:
+                raise KeyboardInterrupt
+            return True
+
+    config = RunConfig(goal="bed", env_id=STATE, mode="scratch", n_envs=2, steps=600, greedy_phase=600,
+                       checkpoint_every=0)
+    run_dir, _, done = train(config, tmp_path, callbacks=[Interrupt()])
+    assert not done
+    result = runner.invoke(app, ["train", "--resume", str(run_dir), "--steps", "400", "--card-episodes", "0"])
+    assert result.exit_code == 0, result.output
+    saved = yaml.safe_load((run_dir / "config.yaml").read_text())
+    assert saved["finished"] and saved["steps"] == 400 and saved["greedy_phase"] == 400

@@ -42,8 +42,7 @@ def test_train_writes_the_run_folder(zoo, tmp_path, mode):
     cfg = yaml.safe_load((run / "config.yaml").read_text())
     assert cfg["finished"] and cfg["num_timesteps"] >= 400
     # dopt train's default harvest (all 400 steps here), acted greedily by the current weights: kickstarting only
-    assert (cfg["consistency_harvest"], cfg["consistency_harvest_average"], cfg["greedy_phase"]) == (
-        (30_000, False, 400) if mode == "kickstart" else (0, False, 0))
+    assert (cfg["consistency_harvest"], cfg["greedy_phase"]) == ((30_000, 400) if mode == "kickstart" else (0, 0))
     assert cfg["consistency_validation"] == (40 if mode == "kickstart" else 0)  # the harvest's fit, validated
     # the replays' reference computed ahead: a new kickstarting run's default, in the overlapped loop dopt train runs
     assert cfg["acer_kwargs"].get("average_ahead", False) is (mode == "kickstart")
@@ -69,13 +68,12 @@ def test_train_writes_the_run_folder(zoo, tmp_path, mode):
 
 def test_the_default_harvest_gives_way_to_the_options_given(zoo, tmp_path):
     result = runner.invoke(app, _train_args(zoo, tmp_path, "--mode", "kickstart", "--consistency-harvest", "200",
-                                            "--consistency-harvest-average", "--greedy-phase", "0",
-                                            "--card-episodes", "0"))
+                                            "--greedy-phase", "0", "--card-episodes", "0"))
     assert result.exit_code == 0, result.output
     assert "of its last 200 training steps" in result.output
     cfg = yaml.safe_load((tmp_path / "sb3_disagree__ApartmentState-v0" / "bathtub" / "kickstart-0" / "config.yaml")
                          .read_text())
-    assert (cfg["consistency_harvest"], cfg["consistency_harvest_average"], cfg["greedy_phase"]) == (200, True, 0)
+    assert (cfg["consistency_harvest"], cfg["greedy_phase"]) == (200, 0)
     assert cfg["consistency"]["harvest"]["episodes"] >= 0
 
 
@@ -84,7 +82,6 @@ def test_the_default_harvest_gives_way_to_the_options_given(zoo, tmp_path):
     ({"steps": 20_000}, "kickstart", None, (30_000, 20_000, 40)),  # a harvest past the budget: all of it greedy
     ({"consistency_harvest": 200}, "kickstart", None, (200, 200, 40)),  # the harvest asked for, acted greedily
     ({"consistency_harvest": 0}, "kickstart", None, (0, 0, 0)),  # no harvest, no greedy phase, no fit to validate
-    ({"consistency_harvest": 0, "consistency_rounds": 2}, "kickstart", None, (0, 0, 40)),  # the rounds' fits
     ({"greedy_phase": 0}, "kickstart", None, (30_000, 0, 40)),  # a harvest sampled as training samples
     ({"greedy_phase": 5_000}, "kickstart", None, (30_000, 5_000, 40)),
     ({"consistency_validation": 0}, "kickstart", None, (30_000, 30_000, 0)),  # the last epoch's weights
@@ -94,8 +91,8 @@ def test_the_default_harvest_gives_way_to_the_options_given(zoo, tmp_path):
 def test_the_default_harvest_gives_way_to_the_options_given_each(given, mode, resume, expected):
     from sb3_disagree.cli.train import _default_harvest
 
-    options = {"consistency_harvest": None, "greedy_phase": None, "consistency_validation": None,
-               "consistency_rounds": 0, "mode": mode, **given}
+    options = {"consistency_harvest": None, "greedy_phase": None, "consistency_validation": None, "mode": mode,
+               **given}
     _default_harvest(options, resume, options.pop("steps", 100_000))
     assert (options["consistency_harvest"], options["greedy_phase"], options["consistency_validation"]) == expected
 

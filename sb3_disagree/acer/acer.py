@@ -67,8 +67,6 @@ class ACER(BaseAlgorithm):
         (0 gives on-policy ACER)
     :param replay_start: Number of stored transitions (over all envs) before replay updates begin
     :param q_coef: Weight of the Q-value loss
-    :param q_loss: "mse" (the paper's squared error) or "huber" (smooth L1, whose gradient per sample is
-        bounded by 1: a large reward arriving late no longer swamps a shared image encoder)
     :param reward_scale: Rewards are multiplied by this in the targets (Q is learned in scaled units)
     :param ent_coef: Weight of the entropy bonus: a constant, a function of the remaining progress (from 1 to
         0), or ``"lin_<x>"`` for a weight falling linearly from x to 0 over the budget (rl-zoo3's notation)
@@ -128,7 +126,6 @@ class ACER(BaseAlgorithm):
         replay_ratio: float = 4.0,
         replay_start: int = 1_000,
         q_coef: float = 0.5,
-        q_loss: str = "mse",
         reward_scale: float = 1.0,
         ent_coef: Union[float, str, Schedule] = 0.01,
         max_grad_norm: float = 10.0,
@@ -170,10 +167,7 @@ class ACER(BaseAlgorithm):
         self.buffer_size = buffer_size
         self.replay_ratio = replay_ratio
         self.replay_start = replay_start
-        if q_loss not in ("mse", "huber"):
-            raise ValueError(f"q_loss must be 'mse' or 'huber', got {q_loss!r}")
         self.q_coef = q_coef
-        self.q_loss = q_loss
         self.reward_scale = reward_scale
         self.ent_coef = ent_coef
         self.max_grad_norm = max_grad_norm
@@ -200,11 +194,6 @@ class ACER(BaseAlgorithm):
         if average_ahead and not overlap:
             raise ValueError("average_ahead computes the replays' reference while the worker replays: it needs overlap")
         self.average_ahead = average_ahead
-        # Set by a harvest of the training's own episodes (consistency.HarvestLabels): the behaviour's own branch
-        # samples from the weights model.zip acts with (the moving average), whose paths the harvest fits.
-        self.act_with_average = False
-        # Set by a frozen harvest (consistency.HarvestLabels): segments are still collected, but not learned from.
-        self.updates_frozen = False
         if _init_setup_model:
             self._setup_model()
 
@@ -234,7 +223,7 @@ class ACER(BaseAlgorithm):
 
     def _excluded_save_params(self) -> list[str]:
         return [*super()._excluded_save_params(), "behaviour", "_last_infos", "_last_stack", "_ent_coef_schedule",
-                "last_rollout_tags", "act_with_average", "updates_frozen"]
+                "last_rollout_tags"]
 
     def _get_torch_save_params(self) -> tuple[list[str], list[str]]:
         return ["policy", "policy.optimizer"], []
@@ -339,8 +328,7 @@ class ACER(BaseAlgorithm):
             observations[step] = self._last_stack
             with th.no_grad():
                 obs_tensor = obs_as_tensor(self._last_stack, self.device)
-                probs = (self.policy.get_distribution(obs_tensor).distribution.probs if self.act_with_average
-                         else self.policy.action_probs(obs_tensor))
+                probs = self.policy.action_probs(obs_tensor)
             # The behaviour (the priors) sees the single observation its policies were trained on.
             actions, mu, behaviour_step = self._checked_behaviour_step(self._last_obs, probs)
             tags = behaviour_step.tags
@@ -426,10 +414,7 @@ class ACER(BaseAlgorithm):
                 values_all[n:],
                 self.gamma,
             ).reshape(n)
-        if self.q_loss == "huber":
-            q_loss = th.nn.functional.smooth_l1_loss(q_taken, q_ret)
-        else:
-            q_loss = 0.5 * (q_ret - q_taken).pow(2).mean()
+        q_loss = 0.5 * (q_ret - q_taken).pow(2).mean()
 
         # The policy objective as a function of the probability vector f, where the trust region acts.
         f = probs.detach().requires_grad_(True)
@@ -479,14 +464,12 @@ class ACER(BaseAlgorithm):
             return self.distill_coef
         return self.distill_coef * max(0.0, 1.0 - self.num_timesteps / self.distill_steps)
 
-    def train(self, segment: Optional[Segment]) -> None:
+    def train(self, segment: Segment) -> None:
         """
         Store the segment, update on it, then on ``Poisson(replay_ratio)`` segments from the replay buffer.
 
-        :param segment: The segment just collected (None: nothing to learn, nothing pending to settle)
+        :param segment: The segment just collected
         """
-        if segment is None:
-            return
         self._update_learning_rate(self.policy.optimizer)
         stats = self._on_policy_update(segment, self.policy)
         n_replay = self._replay(self.policy, self._replay_count(None))
@@ -562,7 +545,6 @@ class ACER(BaseAlgorithm):
         callback.on_training_start(locals(), globals())
         assert self.env is not None
 
-        settled = False
         with self._segment_trainer() as train_on:
             while self.num_timesteps < total_timesteps:
                 segment = self.collect_rollouts(self.env, callback)
@@ -572,21 +554,16 @@ class ACER(BaseAlgorithm):
                 self._update_current_progress_remaining(self.num_timesteps, total_timesteps)
                 self.behaviour_policy.record(self.logger)
                 self._record_tags()
-                if not self.updates_frozen:
-                    train_on(segment)
-                    settled = False
-                elif not settled:  # the first frozen segment: what was earned before is learned, once
-                    train_on(None)
-                    settled = True
+                train_on(segment)
                 if log_interval is not None and iteration % log_interval == 0:
                     self.dump_logs(iteration)
 
         callback.on_training_end()
         return self
 
-    def _segment_trainer(self) -> contextlib.AbstractContextManager[Callable[[Optional[Segment]], None]]:
+    def _segment_trainer(self) -> contextlib.AbstractContextManager[Callable[[Segment], None]]:
         """What learns from each collected segment: :meth:`train`, or with ``overlap`` the overlapped trainer
-        (:func:`sb3_disagree.acer.overlap.overlapped_updates`); called with None, it settles what is pending."""
+        (:func:`sb3_disagree.acer.overlap.overlapped_updates`)."""
         return overlapped_updates(self) if self.overlap else contextlib.nullcontext(self.train)
 
     def _record_tags(self) -> None:

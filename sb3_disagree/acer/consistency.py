@@ -390,15 +390,11 @@ class HarvestLabels(BaseCallback):
     from there: the rest of a path to the goal is a path to the goal).
 
     :param start: The env step after which steps are kept (the budget minus the harvest)
-    :param from_average: Over the harvest, the behaviour samples from the weights the model acts with (its moving
-        average, where one is kept) instead of the current ones (ACER's ``mu`` is still the distribution acted by)
-    :param frozen: Over the harvest, ACER makes no update: the paths come from one fixed policy, the one the fit
-        starts from, and the harvest's env steps cost no update
     """
 
-    def __init__(self, start: int, from_average: bool = False, frozen: bool = False) -> None:
+    def __init__(self, start: int) -> None:
         super().__init__()
-        self.start, self.from_average, self.frozen = start, from_average, frozen
+        self.start = start
         self.trails = _Trails(0)  # what was kept: labels, episodes, successes
 
     def _init_callback(self) -> None:
@@ -407,8 +403,6 @@ class HarvestLabels(BaseCallback):
     def _on_step(self) -> bool:
         if self.num_timesteps <= self.start:  # num_timesteps counts this step already
             return True
-        self.model.act_with_average = self.from_average
-        self.model.updates_frozen = self.frozen
         # ACER's collect_rollouts: the net's input of this step, and the observation (its newest frame) before it
         net_inputs, obs = self.locals["observations"][self.locals["step"]], self.model._last_obs
         for i, action in enumerate(self.locals["actions"]):
@@ -417,5 +411,3 @@ class HarvestLabels(BaseCallback):
             self.trails.end(i, bool(self.locals["infos"][i].get("is_success")))
         return True
 
-    def _on_training_end(self) -> None:
-        self.model.act_with_average = self.model.updates_frozen = False

@@ -11,7 +11,7 @@ import contextlib
 import copy
 from collections.abc import Callable, Iterator
 from concurrent.futures import Future, ThreadPoolExecutor
-from typing import Any, Optional
+from typing import Any
 
 import numpy as np
 import torch as th
@@ -28,13 +28,12 @@ def copy_learner(learner: ACERPolicy, policy: ACERPolicy) -> None:
 
 
 @contextlib.contextmanager
-def overlapped_updates(model: Any) -> Iterator[Callable[[Optional[Segment]], None]]:
+def overlapped_updates(model: Any) -> Iterator[Callable[[Segment], None]]:
     """
     A function that learns from each collected segment: it does the on-policy update on a learner copy of
     the policy, copies the learner into ``model.policy`` (which the rollouts act with) and hands the segment's
-    replay updates to a second thread. Called with None, it settles instead: the pending and carried replay
-    updates are made and copied into ``model.policy``, which then holds all that was learned. Leaving the context
-    (also on an interruption) waits for the last replay updates: what was collected is learned.
+    replay updates to a second thread. Leaving the context (also on an interruption) waits for the last replay
+    updates and makes the carried ones: what was collected is learned.
 
     :param model: The ACER model whose ``learn`` collects the segments (not imported here: ACER imports this)
     """
@@ -52,14 +51,9 @@ def overlapped_updates(model: Any) -> Iterator[Callable[[Optional[Segment]], Non
             model.logger.record("train/replay_updates", pending[0].result())  # still pending if interrupted
             pending.clear()
 
-    def hand_over(segment: Optional[Segment]) -> None:
+    def hand_over(segment: Segment) -> None:
         nonlocal backlog
         finish_replays()
-        if segment is None:  # no more updates for now: what was earned is learned, and the rollouts act with it
-            model._replay(learner, backlog, samples)
-            backlog = 0
-            copy_learner(learner, model.policy)
-            return
         model._update_learning_rate(learner.optimizer)
         th.set_num_threads(threads)  # the other thread is idle here
         model._record_train(model._on_policy_update(segment, learner))

@@ -102,18 +102,11 @@ class RunConfig:
     :param greedy_epsilon: The policy's own weight in the behaviour during the greedy phase, in (0, 1]
     :param checkpoint_every: Write a checkpoint (model, replay buffer, log positions) every this many env steps;
         0 only at the end
-    :param consistency_rounds: After training, this many rounds of the greedy-consistency phase (docs/method.md):
-        the saved ``model.zip`` is then the refined policy, the trained one stays in the last checkpoint (0: none)
-    :param consistency_steps: Env steps of each round of the phase, over 4 envs of their own
-    :param consistency_harvest: The loop-free paths of the training's own successful episodes over its last this
-        many env steps (all of them if the budget is smaller) join the phase's labels (no env step more); without
-        rounds they are fitted alone (0: none; dopt train: ``DOPT_TRAIN_HARVEST`` for mode kickstart)
-    :param consistency_harvest_average: Over the harvest the new policy acts by the moving average of its weights
-        (what model.zip acts with, ``ema_decay``) instead of the current ones
-    :param consistency_harvest_frozen: Over the harvest ACER makes no update: its paths come from the one policy
-        the fit starts from, and its env steps cost no update
-    :param consistency_epochs: Passes over the labels in each fit of the phase (and in the harvest's fit)
-    :param consistency_validation: Each fit of the phase (and the harvest's) is validated after every epoch, the new
+    :param consistency_harvest: ``model.zip`` is fitted to the loop-free paths of the training's own successful
+        episodes over its last this many env steps (all of them if the budget is smaller; no env step more; 0: none;
+        dopt train: ``DOPT_TRAIN_HARVEST`` for mode kickstart)
+    :param consistency_epochs: Passes over the labels in the harvest's fit
+    :param consistency_validation: The harvest's fit is validated after every epoch, the new
         policy acting greedily for this many episodes (env seeds of their own, cut at ``VALIDATION_MAX_STEPS``), and
         keeps the weights of the epoch that validates best (0: none, the last epoch's; dopt train:
         ``DOPT_TRAIN_VALIDATION`` for mode kickstart)
@@ -145,11 +138,7 @@ class RunConfig:
     record_trajectories: bool = False
     greedy_phase: int = 0
     greedy_epsilon: float = 0.2
-    consistency_rounds: int = 0
-    consistency_steps: int = 20_000
     consistency_harvest: int = 0
-    consistency_harvest_average: bool = False
-    consistency_harvest_frozen: bool = False
     consistency_epochs: int = 3
     consistency_validation: int = 0
 
@@ -202,27 +191,16 @@ class RunConfig:
                              f"{self.greedy_phase} and {self.greedy_epsilon}")
         if self.greedy_phase and self.mode == "ppo":
             raise ValueError("--greedy-phase is a behaviour of ACER; --mode ppo trains SB3's PPO without one")
-        if self.consistency_rounds < 0 or (self.consistency_rounds and self.consistency_steps < 4):
-            raise ValueError("--consistency-rounds must be >= 0 and --consistency-steps >= 4 (one per env), got "
-                             f"{self.consistency_rounds} and {self.consistency_steps}")
         if self.consistency_epochs < 1:
             raise ValueError(f"--consistency-epochs must be >= 1, got {self.consistency_epochs}")
         if self.consistency_harvest < 0:
             raise ValueError(f"--consistency-harvest must be >= 0, got {self.consistency_harvest}")
         if self.consistency_validation < 0:
             raise ValueError(f"--consistency-validation must be >= 0, got {self.consistency_validation}")
-        if self.consistency_validation and not (self.consistency_rounds or self.consistency_harvest):
-            raise ValueError("--consistency-validation validates the greedy-consistency fits: give "
-                             "--consistency-harvest or --consistency-rounds too")
-        if self.consistency_harvest_average and not self.consistency_harvest:
-            raise ValueError("--consistency-harvest-average acts by the average over a harvest: give "
-                             "--consistency-harvest too")
-        if self.consistency_harvest_frozen and not self.consistency_harvest:
-            raise ValueError("--consistency-harvest-frozen stops the updates over a harvest: give "
-                             "--consistency-harvest too")
-        if (self.consistency_rounds or self.consistency_harvest) and self.mode == "ppo":
-            flag = "--consistency-rounds" if self.consistency_rounds else "--consistency-harvest"
-            raise ValueError(f"{flag} refines an ACER policy; --mode ppo trains SB3's PPO")
+        if self.consistency_validation and not self.consistency_harvest:
+            raise ValueError("--consistency-validation validates the harvest's fit: give --consistency-harvest too")
+        if self.consistency_harvest and self.mode == "ppo":
+            raise ValueError("--consistency-harvest refines an ACER policy; --mode ppo trains SB3's PPO")
         if self.mode == "ppo":  # ACER's settings beyond the defaults (--reward-scale, --ema-decay) would be ignored
             given = [k for k, v in self.acer_kwargs.items() if acer_defaults(self.mode).get(k) != v]
             if given:

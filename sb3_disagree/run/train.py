@@ -55,8 +55,8 @@ def train(config: RunConfig, out: Path = Path("runs"), resume: Optional[Path] = 
     :param run_dir: Write the run here instead of under ``out`` (experiments choose their own layout)
     :param steps: With ``resume``, the run's new total of env steps (default: the saved one)
     :param force: Replace an existing run in the folder (without it, an existing run is an error)
-    :param on_round: Called with each round's statistics of the greedy-consistency phase
-        (``config.consistency_rounds``), which follows a finished training; ``model.zip`` is then its policy
+    :param on_round: Called with the statistics of the harvest's fit (``config.consistency_harvest``), which follows a
+        finished training; ``model.zip`` is then the fitted policy
     :param trust: Open a resumed run's saved model, or an embedding saved as a pickle, as SB3 and gensim do,
         unpickling what they carry (files you made); otherwise models are opened without (``sb3_disagree.loading``)
         and pickled embeddings refused
@@ -134,8 +134,7 @@ def train(config: RunConfig, out: Path = Path("runs"), resume: Optional[Path] = 
         own.append(Checkpoint(run_dir, config.checkpoint_every))
     harvest = None
     if config.consistency_harvest:  # a resumed run keeps what it trains from here on
-        harvest = HarvestLabels(config.steps - config.consistency_harvest, config.consistency_harvest_average,
-                                config.consistency_harvest_frozen)
+        harvest = HarvestLabels(config.steps - config.consistency_harvest)
         own.append(harvest)
     finished = True
     try:
@@ -150,7 +149,7 @@ def train(config: RunConfig, out: Path = Path("runs"), resume: Optional[Path] = 
         saved_config.update(num_timesteps=int(model.num_timesteps), finished=finished)
         write_atomic(run_dir / "config.yaml", yaml.safe_dump(saved_config, sort_keys=False))
     env.close()
-    if finished and (config.consistency_rounds or harvest is not None):
+    if finished and harvest is not None:
         model, finished = _refine(config, run_dir, model, saved_config, on_round, harvest)
     return run_dir, model, finished
 
@@ -158,27 +157,21 @@ def train(config: RunConfig, out: Path = Path("runs"), resume: Optional[Path] = 
 def _refine(config: RunConfig, run_dir: Path, model: ACER, saved_config: dict,
             on_round: Optional[Callable[[RoundStats], None]], harvest: Optional[HarvestLabels]) -> tuple[ACER, bool]:
     """
-    The greedy-consistency phase after a finished training (its rounds, with the labels harvested from the
-    training's last episodes): the refined policy replaces ``model.zip`` (the trained one stays in the last
-    checkpoint, which a resumed run continues from) and ``config.yaml`` records the phase. An interrupted phase
-    leaves the trained ``model.zip``; ``--resume`` redoes it (with no harvest: the training is over).
+    The fit to the labels harvested from the training's last episodes, after a finished training: the fitted policy
+    replaces ``model.zip`` (the trained one stays in the last checkpoint, which a resumed run continues from) and
+    ``config.yaml`` records it. An interrupted fit leaves the trained ``model.zip``.
     """
-    from sb3_disagree.run.consistency import consistency_env, greedy_validation
+    from sb3_disagree.run.consistency import greedy_validation
 
-    env = consistency_env(saved_config) if config.consistency_rounds else None
     validate = (greedy_validation(model, saved_config, config.consistency_validation)
                 if config.consistency_validation else None)
     start = time.perf_counter()
     try:
         with sigterm_as_interrupt():
-            history = greedy_consistency(model, env, config.consistency_rounds, config.consistency_steps,
-                                         config.consistency_epochs, seed=config.seed, on_round=on_round,
-                                         harvest=harvest, validate=validate)
+            history = greedy_consistency(model, None, 0, 0, config.consistency_epochs, seed=config.seed,
+                                         on_round=on_round, harvest=harvest, validate=validate)
     except KeyboardInterrupt:  # the weights are half fitted: hand back the trained policy that model.zip holds
         return _load(config, run_dir / "model.zip", run_dir, trust=True), False  # the file this run just wrote
-    finally:
-        if env is not None:
-            env.close()
     with sigterm_as_interrupt():
         replace_model(model, run_dir)
         saved_config["consistency"] = {"num_timesteps": int(model.num_timesteps),
