@@ -12,7 +12,7 @@ import torch as th
 from stable_baselines3.common.env_util import make_vec_env
 
 from sb3_disagree import ACER
-from sb3_disagree.run.logs import silent_logger
+from sb3_disagree.loggers import silent_logger
 
 ARMS = {"shared [64, 64]": [64, 64], "separate pi [64, 64], qf [64, 64]": dict(pi=[64, 64], qf=[64, 64])}
 

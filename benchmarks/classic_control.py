@@ -24,7 +24,7 @@ import yaml
 from docs_section import write_section
 
 from sb3_disagree.rl_zoo import HYPERPARAMS
-from sb3_disagree.run.logs import silent_logger
+from sb3_disagree.loggers import silent_logger
 
 ROOT = Path(__file__).resolve().parent
 RESULTS = ROOT / "results" / "classic"

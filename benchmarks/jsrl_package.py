@@ -17,7 +17,7 @@ from stable_baselines3.common.env_util import make_vec_env
 
 import sb3_disagree  # noqa: F401  (registers the envs)
 from sb3_disagree.priors import Zoo
-from sb3_disagree.run.logs import silent_logger
+from sb3_disagree.loggers import silent_logger
 
 ENV = "sb3_disagree/ApartmentState-v0"
 

@@ -36,8 +36,8 @@ def main() -> None:
     args = parser.parse_args()
     th.set_num_threads(args.threads)
     times: dict[str, list[float]] = defaultdict(list)
-    for name, attr in [("rollout", "collect_rollouts"), ("on-policy update", "_on_policy_update"),
-                       ("replay updates", "_replay")]:
+    for name, attr in [("rollout", "collect_rollouts"), ("on-policy update", "on_policy_update"),
+                       ("replay updates", "replay")]:
         setattr(ACER, attr, timed(times, name, getattr(ACER, attr)))
     overlap.copy_learner = timed(times, "copy to the acting policy", overlap.copy_learner)
     rate = acer_rate("disagreement", args.steps, args.warm, "dummy", overlap=True)

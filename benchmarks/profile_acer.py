@@ -15,7 +15,7 @@ from docs_section import write_section
 from stable_baselines3.common.env_util import make_vec_env
 
 from sb3_disagree import ACER
-from sb3_disagree.run.logs import silent_logger
+from sb3_disagree.loggers import silent_logger
 
 
 def main() -> None:

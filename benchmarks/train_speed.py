@@ -57,7 +57,7 @@ def ppo_rate(steps: int, warm: int, vec_env: str) -> float:
     from stable_baselines3 import PPO
 
     from sb3_disagree.run import RunConfig, build_env
-    from sb3_disagree.run.logs import silent_logger
+    from sb3_disagree.loggers import silent_logger
 
     env = build_env(RunConfig(goal="bathtub", vec_env=vec_env), None)  # the envs dopt train makes
     # rl-zoo3's Atari settings for PPO, with 4 envs.

@@ -24,7 +24,7 @@ import numpy as np
 
 def train(goal: str, seed: int, out: Path) -> None:
     for name in ("sb3_disagree.run.consistency", "sb3_disagree.model_card", "sb3_disagree.callbacks",
-                 "sb3_disagree.run.evaluation", "sb3_disagree.evaluation", "sb3_disagree.acer.consistency",
+                 "sb3_disagree.run.evaluation", "sb3_disagree.evaluation", "sb3_disagree.finish.consistency",
                  "sb3_disagree.cli.app", "sb3_disagree.cli.train", "stable_baselines3.common.evaluation"):
         importlib.import_module(name)
     module = importlib.import_module("sb3_disagree.run.train")
@@ -48,7 +48,7 @@ def refit(out: Path, epochs: int) -> None:
     import yaml
 
     from sb3_disagree import ACER
-    from sb3_disagree.acer.consistency import fit_labels
+    from sb3_disagree.finish.consistency import fit_labels
     from sb3_disagree.defaults import FINAL_EVAL_SEED_OFFSET
     from sb3_disagree.run.evaluation import evaluate_alone
 

@@ -2,6 +2,7 @@
 
 import math
 import time
+import typing
 from pathlib import Path
 from typing import Optional
 
@@ -47,70 +48,94 @@ class LiveDisplay(BaseCallback):
         return t
 
 
-def _run_options() -> list:
-    from sb3_disagree.run import RunConfig, train as run
-    from sb3_disagree.run.config import DOPT_TRAIN_FRAME_STACK, DOPT_TRAIN_HARVEST, DOPT_TRAIN_VALIDATION
+# dopt train's options: every RunConfig field (and the ACER and env settings it nests), None where not given, so
+# that RunConfig resolves them as train(RunConfig(...)) does; grouped in panels, the essentials first.
+PANELS = {
+    "Run": ("goal", "env_id", "mode", "priors", "steps", "seed", "n_envs", "out", "resume", "force", "trust"),
+    "Method": ("alpha", "beta", "entropy_offset", "jsrl_horizon", "init", "zoo", "embedding"),
+    "Memory": ("frame_stack", "loop_flags"),
+    "Finish": ("consistency_harvest", "greedy_phase", "greedy_epsilon", "consistency_epochs",
+               "consistency_validation"),
+    "ACER": ("reward_scale", "ema_decay", "average_ahead", "features_dtype", "overlap", "vec_env"),
+    "Environment": ("collision_penalty", "reward_distance"),
+    "Evaluation and logging": ("eval_every", "eval_episodes", "card_episodes", "checkpoint_every",
+                               "record_trajectories", "progress_every"),
+}
+HELPS = {
+    "goal": "The new goal word (with --resume: the run's own).",
+    "env_id": "Gymnasium id of a navigation env (default sb3_disagree/Apartment-v0).",
+    "mode": "kickstart (default), disagreement, room-sensor, jsrl, finetune, scratch or ppo (README).",
+    "priors": "auto (the two nearest the goal in the embedding), or their goals: a,b.",
+    "steps": "Env steps to train (default 100000; with --resume, the new total).",
+    "seed": "Seed of the policy and the envs (default 0).",
+    "n_envs": "Parallel envs (default 4).",
+    "alpha": "Disagreement window (default 10).",
+    "beta": "Follow the priors while the window's disagreement is below this (default 0.1).",
+    "entropy_offset": "Enter the prior branch when U(0,1) < H(pi) - this (default 0.1).",
+    "jsrl_horizon": "jsrl: the guide's first horizon in steps (default 0: the priors' episode length).",
+    "init": "scratch (default), or prior: start from the nearest prior's weights.",
+    "zoo": "Zoo folder, 'greedy' or 'user' (default: the shipped zoo).",
+    "embedding": "Word vectors file: word2vec, GloVe or fastText (default: MiniLM).",
+    "frame_stack": "Frames the new policy sees (default: the mode's; 3 with loop flags).",
+    "loop_flags": "The newest frame plus flags: does it equal each older one (default: the mode's).",
+    "consistency_harvest": "Fit model.zip to the loop-free successful paths of the last this many steps.",
+    "greedy_phase": "The last this many steps act by the argmax (default: the harvest's).",
+    "greedy_epsilon": "The policy's own samples in the greedy phase (default 0.2).",
+    "consistency_epochs": "Passes over the harvest's labels (default 3).",
+    "consistency_validation": "Greedy episodes that pick the fit's best epoch (default: the mode's).",
+    "reward_scale": "Rewards in ACER's targets times this (default: the mode's).",
+    "ema_decay": "model.zip acts with a moving average of the weights (default: the mode's).",
+    "average_ahead": "Compute the replays' trust-region reference ahead (default: the mode's).",
+    "features_dtype": "bfloat16: the CNN's passes in the updates in bfloat16 (default float32).",
+    "overlap": "Replay updates in a second thread while collecting (default on).",
+    "vec_env": "dummy (default) or subproc (a process per env).",
+    "collision_penalty": "Subtracted from the reward on a blocked move (default 0).",
+    "reward_distance": "euclidean (default) or geodesic: what the reward's distance follows.",
+    "eval_every": "Evaluate the policy alone every this many steps (default 0: never).",
+    "eval_episodes": "Episodes of each of those evaluations (default 20).",
+    "card_episodes": "Episodes each way of the model card's evaluation (default 20; 0: none).",
+    "checkpoint_every": "A checkpoint every this many env steps (default 25000; 0: at the end).",
+    "record_trajectories": "Record env 0's training episodes (trajectories.jsonl).",
+    "progress_every": "Seconds between progress lines off a terminal (default 30).",
+    "out": "Root of the run folders.",
+    "resume": "Continue this run folder from its newest intact checkpoint.",
+    "force": "Replace a run already in the folder.",
+    "trust": "Open a saved model or a pickled embedding as SB3 and gensim do (files you made).",
+}
+BOOLS = ("overlap", "loop_flags", "record_trajectories", "average_ahead")
 
-    helps = {"goal": "The new goal word (required, but with --resume: the run's own)",
-             "steps": "Env steps to train (default 100000); with --resume, the run's new total (default: its saved "
-                      "one)", "priors": "auto (the two nearest the goal in the embedding), or the priors' goals: a,b",
-             "consistency_harvest": "model.zip is fitted to the loop-free paths of the successful episodes of the "
-                                    f"last this many training steps, no env step more (default: {DOPT_TRAIN_HARVEST} for "
-                                    "--mode kickstart, 0 (off) for the others)",
-             "greedy_phase": "The last this many env steps act by the new policy's argmax, --greedy-epsilon of its "
-                             "samples (default: the harvest's steps for a new --mode kickstart run, else 0)",
-             "consistency_validation": "Each greedy-consistency fit (the harvest's) is validated after every "
-                                       "epoch over this many greedy episodes and keeps its best epoch (default: "
-                                       f"{DOPT_TRAIN_VALIDATION} for --mode kickstart with a harvest, else 0 (off))",
-             "frame_stack": "The new policy sees its last this many observations (its memory; default: "
-                            f"{DOPT_TRAIN_FRAME_STACK} with --loop-flags, else 1)",
-             "loop_flags": "The new policy's CNN sees the newest frame, and flags say whether it equals each older "
-                           "frame of the stack: pressed against a wall, turning back and forth (default: on for "
-                           "--mode kickstart on image observations)"}
-    return [*options_of(RunConfig, skip=("acer_kwargs", "env_kwargs"),
-                        types={"goal": Optional[str], "priors": str, "steps": Optional[int], "consistency_harvest": Optional[int],
-                               "frame_stack": Optional[int], "loop_flags": Optional[bool],
-                               "greedy_phase": Optional[int], "consistency_validation": Optional[int]},
-                        flags={"env_id": "--env", "loop_flags": "--loop-flags/--no-loop-flags"}, helps=helps,
-                        # dopt train overlaps the replay updates (faster on two cores); --no-overlap for the
-                        # sequential loop the experiments use. It fits model.zip to the loop-free paths of its own
-                        # last episodes, acted greedily by the current weights (DOPT_TRAIN_HARVEST); None: resolved in
-                        # train. Its new kickstarting runs see three frames, with loop flags (DOPT_TRAIN_FRAME_STACK),
-                        # and validate the harvest's fit epoch by epoch (DOPT_TRAIN_VALIDATION).
-                        defaults={"goal": None, "overlap": True, "steps": None, "consistency_harvest": None,
-                                  "frame_stack": None, "loop_flags": None, "greedy_phase": None,
-                                  "consistency_validation": None}),
-            *options_of(run, only=("out", "resume", "force", "trust"), types={"resume": Optional[Path], "out": Path}),
-            *options_of(_cli_only, flags={"average_ahead": "--average-ahead/--no-average-ahead"})]
+
+def _run_options() -> list:
+    import inspect
+
+    from sb3_disagree.run import RunConfig, train as run
+
+    panel_of = {name: panel for panel, names in PANELS.items() for name in names}
+    params = [*options_of(RunConfig, skip=("acer_kwargs", "env_kwargs"), types={"priors": str}),
+              *options_of(run, only=("out", "resume", "force", "trust"), types={"resume": Optional[Path], "out": Path}),
+              *options_of(_cli_only)]
+    out = []
+    for p in sorted(params, key=lambda p: list(panel_of).index(p.name)):
+        name = p.name
+        kind = p.annotation if name in ("out", "resume", "force", "trust") else Optional[
+            str if name == "priors" else typing.get_args(p.annotation)[0] if typing.get_args(p.annotation) else p.annotation]
+        if kind in (Optional[typing.Any],):
+            kind = Optional[str]
+        flag = "--env" if name == "env_id" else "--" + name.replace("_", "-")
+        decls = f"{flag}/--no-{flag[2:]}" if name in BOOLS else flag
+        default = p.default.default if name in ("out", "force", "trust", "resume") else None
+        option = typer.Option(default, *([decls] if name not in ("force", "trust") else [flag]), help=HELPS[name],
+                              rich_help_panel=panel_of[name], show_default=name == "out")
+        out.append(inspect.Parameter(name, inspect.Parameter.KEYWORD_ONLY, annotation=kind, default=option))
+    return out
 
 
 def _cli_only(card_episodes: int = 20, progress_every: float = 30.0, reward_scale: Optional[float] = None,
               ema_decay: Optional[float] = None, features_dtype: Optional[str] = None,
               average_ahead: Optional[bool] = None,
               collision_penalty: Optional[float] = None, reward_distance: Optional[str] = None) -> None:
-    """
-    :param reward_scale: Rewards in ACER's updates are multiplied by this (default: the mode's; 1.0 for
-        kickstarting, 0.1 for the others). At 1.0 kickstarting's policy is sharper, its argmax a real choice
-        (docs/results.md)
-    :param ema_decay: The saved model acts with a moving average of the policy's weights, of this decay per update
-        (default: the mode's; 0.999 for kickstarting, 0 (the last weights) for the others); learning is unchanged
-        (docs/acer.md, item 22)
-    :param features_dtype: "bfloat16": the CNN's passes in ACER's updates run in bfloat16 (faster on CPUs with
-        bfloat16 instructions); heads, losses, acting and the saved weights stay float32 ("float32", the
-        default: all float32; 9b0ec2d:docs/results.md, "bfloat16 features")
-    :param average_ahead: With the overlapped loop, the trust region's reference for the replay updates is computed
-        by the rollout thread before it hands them over (faster on two cores; the reference up to ceil(replay_ratio)
-        updates older; docs/acer.md, item 24). Default: on for a new --mode kickstart run with the overlapped loop,
-        where it was measured (docs/results.md), else off
-    :param collision_penalty: Subtracted from the env's reward on a blocked move_forward (the env's
-        collision_penalty; default 0, the paper's reward); what counts as success is unchanged
-    :param reward_distance: What the env's reward distance follows: "euclidean" (the apartment's default, the
-        paper's straight line) or "geodesic" (the shortest free path; the office scans always use it); what counts
-        as success is unchanged
-    :param card_episodes: Episodes each way (greedy, sampled) of the evaluation on the model card written beside
-        model.zip (0: none)
-    :param progress_every: Seconds between progress lines when the output is not a terminal
-    """
+    """dopt train's settings that are not RunConfig's own fields: the ACER and env settings it nests, the card and the
+    progress lines."""
 
 
 @command(_run_options())
@@ -120,23 +145,30 @@ def train(**options) -> None:
     with clean_errors():
         from sb3_disagree.run import RunConfig, check_resume, train as run, write_card
 
-        out, resume, force, card_episodes, every, trust = (
-            options.pop(k) for k in ("out", "resume", "force", "card_episodes", "progress_every", "trust"))
-        if options["goal"] is None:
-            if resume is None:
-                raise ValueError("--goal is required: the new goal word (or --resume RUN to continue a run)")
+        out, resume, force, trust = (options.pop(k) for k in ("out", "resume", "force", "trust"))
+        card_episodes, every = options.pop("card_episodes"), options.pop("progress_every")
+        card_episodes = 20 if card_episodes is None else card_episodes
+        every = 30.0 if every is None else every
+        given = {k: v for k, v in options.items() if v is not None}
+        acer = {k: given.pop(k) for k in ("reward_scale", "ema_decay", "features_dtype", "average_ahead") if k in given}
+        env_kwargs = {k: given.pop(k) for k in ("collision_penalty", "reward_distance") if k in given}
+        if acer:
+            given["acer_kwargs"] = acer
+        if env_kwargs:
+            given["env_kwargs"] = env_kwargs
+        if "priors" in given:
+            given["priors"] = _priors(given["priors"])
+        steps = given.get("steps")
+        if resume is not None:
             from sb3_disagree.run.evaluation import read_config
 
-            options["goal"] = read_config(resume)["goal"]
-        options["acer_kwargs"] = {k: v for k in ("reward_scale", "ema_decay", "features_dtype") if (v := options.pop(k)) is not None}
-        _default_ahead(options, resume)
-        options["env_kwargs"] = {k: v for k in ("collision_penalty", "reward_distance") if (v := options.pop(k)) is not None}
-        steps = options["steps"]
-        budget = 100_000 if steps is None else steps
-        _default_harvest(options, resume, budget)
-        _default_memory(options, resume)
-        config = RunConfig(**{**options, "steps": budget, "priors": _priors(options["priors"])})
-        config.validate() if resume is None else check_resume(config, resume, force)
+            check_resume(resume, given, force)
+            config = RunConfig(goal=read_config(resume)["goal"])  # the run's saved settings are what train() uses
+        elif "goal" not in given:
+            raise ValueError("--goal is required: the new goal word (or --resume RUN to continue a run)")
+        else:
+            config = RunConfig(**given)
+            config.validate()
         display = _Display(every)
         with display as callback:
             run_dir, model, finished = run(config, out, resume=resume, callbacks=[callback], force=force,
@@ -146,53 +178,6 @@ def train(**options) -> None:
             console.print(f"evaluating the new policy alone for its card ({card_episodes} episodes each way)")
         _show_evaluations(write_card(run_dir, model, card_episodes if finished else 0, command_line()))
         _show_end(run_dir, model, finished, config.goal)
-
-
-def _default_harvest(options: dict, resume: Optional[Path], budget: int) -> None:
-    """dopt train's harvest where none is given: ``DOPT_TRAIN_HARVEST`` for a new run of the default mode
-    (kickstarting, where it was measured), acted greedily: a new kickstarting run's harvest, whatever its length, is
-    a greedy phase too unless ``--greedy-phase`` says otherwise, and its fits are validated
-    (``DOPT_TRAIN_VALIDATION`` episodes) where there is a fit. None for the other modes, and none asked of a resumed
-    run (it keeps its saved settings).
-
-    :param budget: The run's env steps (a harvest longer than the budget is acted greedily throughout)
-    """
-    from sb3_disagree.run.config import DOPT_TRAIN_HARVEST, DOPT_TRAIN_VALIDATION
-
-    new_kickstart = resume is None and options["mode"] == "kickstart"
-    if options["consistency_harvest"] is None:
-        options["consistency_harvest"] = DOPT_TRAIN_HARVEST if new_kickstart else 0
-    if options["greedy_phase"] is None:
-        options["greedy_phase"] = min(options["consistency_harvest"], budget) if new_kickstart else 0
-    if options["consistency_validation"] is None:
-        fitted = options["consistency_harvest"]
-        options["consistency_validation"] = DOPT_TRAIN_VALIDATION if new_kickstart and fitted else 0
-
-
-def _default_ahead(options: dict, resume: Optional[Path]) -> None:
-    """dopt train's ``average_ahead`` where none is given: on for a new run of the default mode (kickstarting, where
-    it was measured) in the overlapped loop it needs; off otherwise, and a resumed run keeps its saved setting. Moves
-    the option into ``acer_kwargs`` (only when on, as ACER's default is off)."""
-    ahead = options.pop("average_ahead")
-    if ahead is None:
-        ahead = resume is None and options["mode"] == "kickstart" and options["overlap"]
-    if ahead:
-        options["acer_kwargs"]["average_ahead"] = True
-
-
-def _default_memory(options: dict, resume: Optional[Path]) -> None:
-    """dopt train's memory where none is given: ``DOPT_TRAIN_FRAME_STACK`` frames with loop flags for a new run of
-    the default mode (kickstarting, where they were measured) on image observations; one frame otherwise, and a
-    resumed run keeps its saved memory."""
-    from sb3_disagree.run.config import DOPT_TRAIN_FRAME_STACK, image_observations
-
-    stack, flags = options["frame_stack"], options["loop_flags"]
-    if flags is None:
-        flags = (stack is None and resume is None and options["mode"] == "kickstart"
-                 and image_observations(options["env_id"]))
-    if stack is None:
-        stack = DOPT_TRAIN_FRAME_STACK if flags else 1
-    options["frame_stack"], options["loop_flags"] = stack, bool(flags)
 
 
 def _show_round(r) -> None:

@@ -272,14 +272,14 @@ def test_overlap_interrupted_learns_what_was_collected():
 class CountingACER(ACER):
     """Records the Poisson draws and the replay batches handed to the worker."""
 
-    def _replay_count(self, rng):
-        n = super()._replay_count(rng)
+    def replay_count(self, rng):
+        n = super().replay_count(rng)
         self.draws = [*getattr(self, "draws", []), n]
         return n
 
-    def _replay(self, policy, n_replay, rng=None, batches=None):
+    def replay(self, policy, n_replay, rng=None, batches=None):
         self.batches = [*getattr(self, "batches", []), n_replay]
-        return super()._replay(policy, n_replay, rng, batches)
+        return super().replay(policy, n_replay, rng, batches)
 
 
 def test_overlap_caps_the_replays_per_segment_and_carries_the_rest():

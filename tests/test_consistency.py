@@ -15,7 +15,7 @@ from typer.testing import CliRunner
 from sb3_disagree import ACER
 from stable_baselines3.common.callbacks import BaseCallback
 
-from sb3_disagree.acer.consistency import (HarvestLabels, RoundStats, _Labels, _Rounds, collect_escapes,
+from sb3_disagree.finish.consistency import (HarvestLabels, RoundStats, _Labels, _Rounds, collect_escapes,
                                           expert_loop_labels, fit_best_epoch, fit_labels, greedy_consistency,
                                           loop_free_labels)
 from sb3_disagree.acer.memory import push_frames

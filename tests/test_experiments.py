@@ -340,11 +340,8 @@ def test_shipped_experiments_load():
         assert load_experiment(name).runs()
 
 
-def test_a_cells_mode_picks_acers_defaults_and_the_grid_and_cell_go_on_top(tmp_path, monkeypatch):
-    import sb3_disagree.run.config as config_module
+def test_a_cells_mode_picks_acers_defaults_and_the_grid_and_cell_go_on_top(tmp_path):
     from sb3_disagree.run import ACER_KWARGS, RunConfig
-
-    monkeypatch.setattr(config_module, "MODE_ACER_KWARGS", {"kickstart": {"reward_scale": 1.0}})
 
     spec = {"name": "modes", "goal": "bathtub", "priors": ["shower", "toilet"], "steps": 320, "seeds": [0],
             "budgets": [320], "acer": {"ent_coef": 0.02},
@@ -391,10 +388,10 @@ def test_shipped_grids_still_make_their_committed_runs():
     from dataclasses import asdict
     from pathlib import Path
 
-    from sb3_disagree.experiments.spec import _acer_signature_defaults
+    from sb3_disagree.run.presets import RESOLVED, acer_signature_defaults
 
     results = Path(__file__).resolve().parents[1] / "benchmarks" / "results" / "experiments"
-    acer, compared = _acer_signature_defaults(), 0
+    acer, compared = acer_signature_defaults(), 0
     for path in sorted(SHIPPED.glob("*.yaml")):
         experiment = load_experiment(path)
         for run in experiment.runs():
@@ -404,7 +401,10 @@ def test_shipped_grids_still_make_their_committed_runs():
             saved, now = json.loads(saved_path.read_text())["config"], asdict(run.config)
             # a setting newer than the record: the record ran at ACER's default
             assert {**acer, **saved["acer_kwargs"]} == {**acer, **now["acer_kwargs"]}, (experiment.name, run.cell)
-            assert saved["mode"] == now["mode"] and saved.get("frame_stack", 1) == now["frame_stack"]
+            assert saved["mode"] == now["mode"]
+            # what a mode's preset resolves: the saved value, or what the library ran with before it was saved
+            assert {k: saved.get(k, old) for k, old in RESOLVED.items()} == {k: now[k] for k in RESOLVED}, (
+                experiment.name, run.cell)
             compared += 1
     assert compared >= 170  # the grids behind the results page
 

@@ -294,7 +294,7 @@ def test_prior_teacher_stops_asking_the_priors_once_distillation_has_annealed_to
 
 
 def test_greedy_phase_acts_by_the_argmax_with_an_exact_mu_after_its_start():
-    from sb3_disagree.behaviour import GreedyPhase
+    from sb3_disagree.finish.greedy_phase import GreedyPhase
     from sb3_disagree.options import PriorTeacher
 
     n = 3000
@@ -318,7 +318,8 @@ def test_greedy_phase_acts_by_the_argmax_with_an_exact_mu_after_its_start():
 def test_greedy_phase_reports_no_prior_usage_for_the_steps_it_took_over():
     from stable_baselines3.common.logger import Logger
 
-    from sb3_disagree.behaviour import GreedyPhase, OnPolicyBehaviour
+    from sb3_disagree.behaviour import OnPolicyBehaviour
+    from sb3_disagree.finish.greedy_phase import GreedyPhase
 
     class Half(OnPolicyBehaviour):  # an inner behaviour that would have followed priors half the time
         def record(self, logger):

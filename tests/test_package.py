@@ -47,6 +47,9 @@ def test_the_wheel_works_alone_from_another_folder(tmp_path):
     # Nothing of this process's own path may leak into the commands (the wheel's copy must be what imports).
     env = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}
     pip_wheel = [str(dist) if t == "dist" else str(repo) if t == "." else t for t in make_wheel.split()]
+    import shutil
+
+    shutil.rmtree(repo / "build", ignore_errors=True)  # setuptools' build folder keeps files the tree has dropped
     build = subprocess.run([sys.executable, "-m", *pip_wheel, "--no-build-isolation", "-q"], capture_output=True,
                            text=True, timeout=300, env=env)
     assert build.returncode == 0, build.stderr
@@ -168,3 +171,25 @@ def test_the_package_has_no_import_cycle_and_imports_no_private_name():
     for module in graph:
         if module not in state:
             visit(module, [])
+
+
+def test_the_architecture_page_names_every_module():
+    """docs/architecture.md's tree names every module of the package and of the command line, each in its folder."""
+    from pathlib import Path
+
+    repo = Path(__file__).resolve().parents[1]
+    tree = (repo / "docs" / "architecture.md").read_text().split("```")[1]
+    named, folders = set(), []  # folders: (indent, name) of the enclosing folders
+    for line in tree.splitlines():
+        if not line.strip():
+            continue
+        indent, entry = len(line) - len(line.lstrip()), line.split()[0]
+        if not (entry.endswith("/") or entry.endswith(".py")):
+            continue  # a description's continuation
+        folders = [f for f in folders if f[0] < indent]
+        if entry.endswith("/"):
+            folders.append((indent, entry.rstrip("/")))
+        else:
+            named.add("/".join([f[1] for f in folders] + [entry]))
+    modules = {str(p.relative_to(repo)) for root in ("sb3_disagree", "cli") for p in (repo / root).rglob("*.py")}
+    assert modules <= named, sorted(modules - named)

@@ -21,9 +21,7 @@ SUBSTITUTIONS = [
     (r"--episodes 100", "--episodes 2"),
     (r"(--video \S+)", r"\1 --video-episodes 1"),
     (r'"sb3_disagree/Apartment-v0"', f'"{STATE}"'),
-    (r'RunConfig\(goal="bathtub",', f'RunConfig(goal="bathtub", env_id="{STATE}", steps=400, n_envs=2,'),
-    (r"loop_flags=True", "loop_flags=False"),  # the state apartment has no frames to compare
-    (r"greedy_phase=30_000", "greedy_phase=400"),
+    (r'RunConfig\(goal="bathtub"\)', f'RunConfig(goal="bathtub", env_id="{STATE}", steps=400, n_envs=2)'),
     (r"n_eval_episodes=100", "n_eval_episodes=2"),
     (r"episodes=20\)", "episodes=1)"),
     (r"learn\(100_000\)", "learn(1_000)"),

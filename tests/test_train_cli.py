@@ -89,12 +89,10 @@ def test_the_default_harvest_gives_way_to_the_options_given(zoo, tmp_path):
     ({}, "kickstart", "RUN", (0, 0, 0)),  # a resumed run keeps its saved settings
 ])
 def test_the_default_harvest_gives_way_to_the_options_given_each(given, mode, resume, expected):
-    from sb3_disagree.cli.train import _default_harvest
-
-    options = {"consistency_harvest": None, "greedy_phase": None, "consistency_validation": None, "mode": mode,
-               **given}
-    _default_harvest(options, resume, options.pop("steps", 100_000))
-    assert (options["consistency_harvest"], options["greedy_phase"], options["consistency_validation"]) == expected
+    """RunConfig resolves what it is not given from the mode's preset; a saved run keeps what it ran with."""
+    config = (RunConfig(goal="bathtub", mode=mode, **given) if resume is None
+              else RunConfig.of_saved({"goal": "bathtub", "mode": mode, **given}))
+    assert (config.consistency_harvest, config.greedy_phase, config.consistency_validation) == expected
 
 
 @pytest.mark.parametrize("given,env,mode,resume,expected", [
@@ -108,11 +106,38 @@ def test_the_default_harvest_gives_way_to_the_options_given_each(given, mode, re
     ({"frame_stack": 2, "loop_flags": True}, STATE_ID, "kickstart", None, (2, True)),  # validation refuses it later
 ])
 def test_the_default_memory_gives_way_to_the_options_given(given, env, mode, resume, expected):
-    from sb3_disagree.cli.train import _default_memory
+    config = (RunConfig(goal="bathtub", env_id=env, mode=mode, **given) if resume is None
+              else RunConfig.of_saved({"goal": "bathtub", "env_id": env, "mode": mode, **given}))
+    assert (config.frame_stack, config.loop_flags) == expected
 
-    options = {"frame_stack": None, "loop_flags": None, "env_id": env, "mode": mode, **given}
-    _default_memory(options, resume)
-    assert (options["frame_stack"], options["loop_flags"]) == expected
+
+@pytest.mark.parametrize("args", [[], ["--mode", "disagreement"], ["--mode", "kickstart", "--no-overlap"],
+                                  ["--env", STATE_ID, "--mode", "jsrl", "--steps", "20000"]])
+def test_dopt_train_runs_exactly_what_runconfig_resolves(args, monkeypatch, tmp_path):
+    """`dopt train --goal G ...` and `train(RunConfig(goal=G, ...))` are one configuration, field by field: the
+    command line resolves nothing itself."""
+    from dataclasses import asdict
+
+    import sb3_disagree.run as run_package
+
+    seen = {}
+
+    def capture(config, out, **kwargs):
+        seen["config"] = config
+        raise KeyboardInterrupt  # nothing trains
+
+    monkeypatch.setattr(run_package, "train", capture)
+    runner.invoke(app, ["train", "--goal", "bathtub", "--out", str(tmp_path), *args])
+    fields = dict(zip(args[::2], args[1::2]))
+    library = RunConfig(goal="bathtub", **{k.lstrip("-").replace("-", "_").replace("env", "env_id"): v
+                                           for k, v in fields.items() if not k.startswith("--no")},
+                        **({"overlap": False} if "--no-overlap" in args else {}))
+    library = RunConfig(**{**asdict(library), "steps": int(library.steps)})
+    assert asdict(seen["config"]) == asdict(library)
+    if not args:  # the default: kickstarting with the finish, on the RGB apartment
+        assert (library.frame_stack, library.loop_flags, library.consistency_harvest, library.greedy_phase,
+                library.consistency_validation, library.overlap) == (3, True, 30_000, 30_000, 40, True)
+        assert library.acer_kwargs["average_ahead"] and library.acer_kwargs["reward_scale"] == 1.0
 
 
 def test_greedy_phase_takes_the_end_of_the_budget(zoo, tmp_path):
@@ -172,7 +197,7 @@ def test_average_ahead_reaches_acer_and_needs_the_overlapped_loop(zoo, tmp_path)
         result = runner.invoke(app, _train_args(zoo, out, "--mode", "kickstart", *extra))
         assert result.exit_code == 0, result.output
         run = out / "sb3_disagree__ApartmentState-v0" / "bathtub" / "kickstart-0"
-        assert "average_ahead" not in yaml.safe_load((run / "config.yaml").read_text())["acer_kwargs"]
+        assert yaml.safe_load((run / "config.yaml").read_text())["acer_kwargs"].get("average_ahead", False) is False
         assert not ACER.load(run / "model.zip").average_ahead
 
 
@@ -269,7 +294,7 @@ def _checkpoint(run):
 
 
 def test_interrupt_saves_and_resume_continues_the_step_count(zoo, tmp_path):
-    config = RunConfig(goal="bathtub", env_id=STATE_ID, steps=600, n_envs=2, zoo=str(zoo))
+    config = RunConfig(goal="bathtub", env_id=STATE_ID, steps=600, n_envs=2, zoo=str(zoo), overlap=False)
     run, model, finished = train(config, tmp_path, callbacks=[StopAt(200)])
     assert not finished and (_checkpoint(run) / "replay_buffer.npz").exists() and (run / "model.zip").exists()
     stopped_at = model.num_timesteps
@@ -425,7 +450,7 @@ def test_evaluations_along_the_way_leave_training_unchanged(zoo, tmp_path):
 
     weights = []
     for eval_every in (0, 250):
-        config = RunConfig(goal="bathtub", env_id=STATE_ID, steps=600, n_envs=2, zoo=str(zoo), eval_every=eval_every,
+        config = RunConfig(goal="bathtub", env_id=STATE_ID, steps=600, overlap=False, n_envs=2, zoo=str(zoo), eval_every=eval_every,
                            eval_episodes=2, acer_kwargs={"replay_start": 100})
         _, model, _ = train(config, tmp_path / str(eval_every))
         weights.append(th.nn.utils.parameters_to_vector(model.policy.net.parameters()).detach())

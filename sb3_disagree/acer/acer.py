@@ -470,34 +470,42 @@ class ACER(BaseAlgorithm):
 
         :param segment: The segment just collected
         """
-        self._update_learning_rate(self.policy.optimizer)
-        stats = self._on_policy_update(segment, self.policy)
-        n_replay = self._replay(self.policy, self._replay_count(None))
-        self._record_train({**stats, "replay_updates": n_replay})
+        stats = self.on_policy_update(segment, self.policy)
+        n_replay = self.replay(self.policy, self.replay_count(None))
+        self.record_train({**stats, "replay_updates": n_replay})
 
-    def _on_policy_update(self, segment: Segment, policy: ACERPolicy) -> dict[str, float]:
+    # The update API a trainer calls (train above, the overlapped trainer in overlap.py): each part of learning from
+    # a segment, on the policy given (the overlapped trainer's learner copy, or the model's own).
+
+    def on_policy_update(self, segment: Segment, policy: ACERPolicy) -> dict[str, float]:
+        """
+        Store the segment and update ``policy`` on it, at the learning rate of the current progress.
+
+        :return: The update's statistics (``train/`` keys without the prefix)
+        """
+        self._update_learning_rate(policy.optimizer)
         policy.set_training_mode(True)
         self.replay_buffer.add(segment)
         return self._update(segment, policy)
 
-    def _replay_count(self, rng: Optional[np.random.Generator]) -> int:
+    def replay_count(self, rng: Optional[np.random.Generator]) -> int:
         """How many replay updates this segment earns: ``Poisson(replay_ratio)`` once the buffer is warm, drawn
         from ``rng`` (numpy's global generator if None)."""
         if self.replay_ratio <= 0 or self.replay_buffer.size() < self.replay_start:
             return 0
         return int(np.random.poisson(self.replay_ratio) if rng is None else rng.poisson(self.replay_ratio))
 
-    def _replay(self, policy: ACERPolicy, n_replay: int, rng: Optional[np.random.Generator] = None,
+    def replay(self, policy: ACERPolicy, n_replay: int, rng: Optional[np.random.Generator] = None,
                 batches: Optional[list[tuple[Segment, th.Tensor]]] = None) -> int:
         """``n_replay`` updates of ``policy`` on segments drawn from the replay buffer with ``rng``, or on
-        ``batches`` (segments with their trust region's reference, :meth:`_replay_ahead`) where given."""
+        ``batches`` (segments with their trust region's reference, :meth:`replay_references`) where given."""
         for i in range(n_replay):
             segment, reference = (self.replay_buffer.sample(rng), None) if batches is None else batches[i]
             self._update(segment, policy, reference)
         return n_replay
 
-    def _replay_ahead(self, policy: ACERPolicy, n_replay: int, rng: np.random.Generator) -> list[tuple[Segment, th.Tensor]]:
-        """``n_replay`` segments drawn from the replay buffer with ``rng`` (as :meth:`_replay` would draw them),
+    def replay_references(self, policy: ACERPolicy, n_replay: int, rng: np.random.Generator) -> list[tuple[Segment, th.Tensor]]:
+        """``n_replay`` segments drawn from the replay buffer with ``rng`` (as :meth:`replay` would draw them),
         each with the trust region's reference computed now by ``policy``'s average network (``average_ahead``)."""
         batches = []
         with th.no_grad():
@@ -507,7 +515,8 @@ class ACER(BaseAlgorithm):
                 batches.append((segment, self._average_probs(policy, obs)))
         return batches
 
-    def _record_train(self, stats: dict[str, float]) -> None:
+    def record_train(self, stats: dict[str, float]) -> None:
+        """Log an update's statistics under ``train/``."""
         for key, value in stats.items():
             self.logger.record(f"train/{key}", value)
         self.logger.record("train/n_updates", self._n_updates, exclude="tensorboard")

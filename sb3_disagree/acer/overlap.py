@@ -54,22 +54,21 @@ def overlapped_updates(model: Any) -> Iterator[Callable[[Segment], None]]:
     def hand_over(segment: Segment) -> None:
         nonlocal backlog
         finish_replays()
-        model._update_learning_rate(learner.optimizer)
         th.set_num_threads(threads)  # the other thread is idle here
-        model._record_train(model._on_policy_update(segment, learner))
+        model.record_train(model.on_policy_update(segment, learner))
         th.set_num_threads(half)
         copy_learner(learner, model.policy)
         # At most `cap` replay updates per segment, the rest carried to the next: a large Poisson draw
         # would otherwise keep the rollouts waiting while a small one leaves the worker idle.
-        backlog += model._replay_count(counts)
+        backlog += model.replay_count(counts)
         n_replay = min(backlog, cap)
         backlog -= n_replay
         batches = None
         if model.average_ahead:  # the worker is idle until the submit below
             th.set_num_threads(threads)
-            batches = model._replay_ahead(learner, n_replay, samples)
+            batches = model.replay_references(learner, n_replay, samples)
             th.set_num_threads(half)
-        pending.append(replays.submit(model._replay, learner, n_replay, samples, batches))
+        pending.append(replays.submit(model.replay, learner, n_replay, samples, batches))
 
     threads = th.get_num_threads()
     half = max(1, threads // 2)
@@ -80,5 +79,5 @@ def overlapped_updates(model: Any) -> Iterator[Callable[[Segment], None]]:
         finally:
             finish_replays()
             th.set_num_threads(threads)
-            model._replay(learner, backlog, samples)  # what was earned is learned
+            model.replay(learner, backlog, samples)  # what was earned is learned
             copy_learner(learner, model.policy)

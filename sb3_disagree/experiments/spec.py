@@ -41,6 +41,7 @@ import yaml
 
 from sb3_disagree.files import safe_name
 from sb3_disagree.run import RunConfig, acer_defaults
+from sb3_disagree.run.presets import acer_signature_defaults
 
 # Experiments shipped with the repository; a path to any YAML file works too.
 SHIPPED = Path(__file__).resolve().parents[1] / "data" / "experiments"
@@ -55,18 +56,10 @@ def _differing(saved: dict[str, Any], config: RunConfig, ignore: tuple[str, ...]
     defaults = {k: f.default for k, f in RunConfig.__dataclass_fields__.items() if f.default is not MISSING}
     wanted = asdict(config)
     if isinstance(saved.get("acer_kwargs"), dict):  # likewise an ACER setting: the record ran at ACER's default
-        acer = _acer_signature_defaults()
+        acer = acer_signature_defaults()
         saved = {**saved, "acer_kwargs": {**acer, **saved["acer_kwargs"]}}
         wanted["acer_kwargs"] = {**acer, **wanted["acer_kwargs"]}
     return [k for k in wanted if k not in (*ignore, *OUTPUT_ONLY) and saved.get(k, defaults.get(k)) != wanted[k]]
-
-
-def _acer_signature_defaults() -> dict[str, Any]:
-    """ACER's own keyword defaults (what a run that did not name a setting trained with)."""
-    from sb3_disagree.acer import ACER
-
-    return {name: p.default for name, p in inspect.signature(ACER.__init__).parameters.items()
-            if p.default is not inspect.Parameter.empty and isinstance(p.default, (int, float, str, bool))}
 
 
 @dataclass

@@ -24,7 +24,7 @@ from sb3_disagree.acer.torch_layers import CNN_SEES, loop_flags_kwargs
 from sb3_disagree.defaults import PRIOR_VALIDATION_SEED
 from sb3_disagree.envs.vec import make_vec
 from sb3_disagree.evaluation import Evaluation, evaluate
-from sb3_disagree.run.logs import silent_logger
+from sb3_disagree.loggers import silent_logger
 
 METHODS = ("dagger", "acer", "ppo")
 # Small image networks keep a zoo of ten priors well under 60 MB.
@@ -332,7 +332,7 @@ def refine_prior(model: ACER, env_id: str, goal: str, rounds: int, steps: int, l
                  n_envs: int = 4, seed: int = 0, progress: Optional[Callable[[str], None]] = None,
                  validation_episodes: int = 0, expert_in_loops: bool = False) -> dict[str, Any]:
     """
-    The greedy-consistency phase (:func:`~sb3_disagree.acer.consistency.greedy_consistency`, three epochs a round)
+    The greedy-consistency phase (:func:`~sb3_disagree.finish.consistency.greedy_consistency`, three epochs a round)
     on a trained prior, in place, on env seeds ``seed + CONSISTENCY_SEED_OFFSET``, apart from its training, its
     validation and its card's; in a loop it draws from ``(1 - loop_uniform) pi + loop_uniform / n``.
 
@@ -344,7 +344,7 @@ def refine_prior(model: ACER, env_id: str, goal: str, rounds: int, steps: int, l
         (``expert_action()``), in failed episodes too; the loop-free paths of successes label the other steps
     :return: The phase's record for the card: its settings, seconds and per-round statistics
     """
-    from sb3_disagree.acer.consistency import greedy_consistency
+    from sb3_disagree.finish.consistency import greedy_consistency
     from sb3_disagree.defaults import CONSISTENCY_SEED_OFFSET
 
     net, best, done = model.policy.acting_net, None, 0

@@ -1,5 +1,6 @@
 """A run's configuration: ``RunConfig`` (saved as the run's ``config.yaml``) and the defaults of each mode."""
 
+import typing
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Optional
@@ -7,150 +8,141 @@ from typing import Any, Optional
 from sb3_disagree.defaults import DEFAULT_ENV
 from sb3_disagree.files import safe_name
 from sb3_disagree.options import MODES
+from sb3_disagree.run.presets import RESOLVED, acer_defaults, acer_signature_defaults, preset, resolve
 
-# Kickstarting's distillation: weight 1 on every state, falling linearly to 0 at 50k env steps.
-KICKSTART: dict[str, Any] = dict(distill_coef=1.0, distill_steps=50_000, distill_states="all")
-# SB3's PPO for the "ppo" mode: rl-zoo3's Atari settings with the runs' 4 envs (sb3_disagree/hyperparams/ppo.yml);
-# learning rate and clip range fall linearly to 0 over the budget, as rl-zoo3's "lin_" values.
-PPO_KWARGS: dict[str, Any] = dict(n_steps=128, n_epochs=4, batch_size=256, learning_rate=2.5e-4, clip_range=0.1,
-                                  ent_coef=0.01, vf_coef=0.5)
-# ACER on the apartment: images through NatureCNN; a buffer of 50k frames is 0.7 GB of uint8. Rewards scaled
-# by 0.1 (Q in units of the +10 goal / 10): at scale 1 the policy's entropy collapsed by 20k steps and the
-# new policy alone fell back to ~0 success; at 0.1 it trains stably (docs/history.md, "Choosing ACER's scale").
-ACER_KWARGS: dict[str, Any] = dict(n_steps=20, buffer_size=50_000, replay_start=2_000, replay_ratio=4, ent_coef=0.01,
-                                   learning_rate=7e-4, reward_scale=0.1)
-# A mode's own ACER settings on top of ACER_KWARGS. Kickstarting: rewards at full scale (the entropy bonus ten times
-# weaker against them, so the argmax is a real choice) and the saved model acting with a moving average of the
-# weights (0.999 per update); over five seeds at 100k the policy alone went from 0.16 to 0.68 greedy on bathtub
-# and 0.18 to 0.47 on nightstand, sampled 0.98 -> 0.99 and 0.98 -> 0.94 (docs/results.md).
-MODE_ACER_KWARGS: dict[str, dict[str, Any]] = {"kickstart": dict(reward_scale=1.0, ema_decay=0.999)}
-# dopt train's consistency_harvest for kickstarting, its default mode: the last 30k training steps are a greedy phase
-# (the current weights' argmax, epsilon 0.2 of their samples) and model.zip is fitted to the loop-free paths of their
-# successful episodes (no env step more, 12-28 s of fitting). Over five seeds a task at 100k, with loop flags, the
-# policy alone reached 0.93 greedy on bathtub and 0.86 on nightstand with the harvest sampled from the moving average,
-# and 0.95 and 0.92 acted greedily by the current weights, sampled 1.00 and 0.99 (docs/history.md).
-DOPT_TRAIN_HARVEST = 30_000
-# dopt train's memory for a new kickstarting run on images: three frames, seen as the newest frame and two loop flags
-# (LoopFlagsCNN). Over five seeds a task at 100k, with the harvest, the policy alone went from 0.77
-# to 0.93 greedy on bathtub and from 0.61 to 0.86 on nightstand, sampled 1.00 and 0.99 (docs/history.md).
-DOPT_TRAIN_FRAME_STACK = 3
-# dopt train's consistency_validation for a new kickstarting run: the harvest's fit keeps, of its epochs, the one whose
-# greedy success over this many validation episodes is highest. One more epoch on the same labels moved a run's
-# greedy success from 0.92 to 0.75 (docs/method.md, "A validated fit").
-DOPT_TRAIN_VALIDATION = 40
-
-
+# Each mode's settings live in hyperparams/modes.yml (run/presets.py); these names read them.
+KICKSTART: dict[str, Any] = preset("kickstart", "distill")
+PPO_KWARGS: dict[str, Any] = preset("ppo", "ppo")
+ACER_KWARGS: dict[str, Any] = preset("all", "acer")
 MAX_STEPS = 10**9  # a budget beyond this is a typo: a billion env steps is weeks on the machines this runs on
-
-
-def acer_defaults(mode: str) -> dict[str, Any]:
-    """ACER's settings for a mode when a run names none: ``ACER_KWARGS`` with the mode's own on top."""
-    return {**ACER_KWARGS, **MODE_ACER_KWARGS.get(mode, {})}
 
 
 @dataclass
 class RunConfig:
     """
-    Everything that defines a run; saved as the run's ``config.yaml``.
+    Everything that defines a run; saved, resolved, as the run's ``config.yaml``. A setting left at None comes from
+    the mode's preset (``hyperparams/modes.yml``, :mod:`sb3_disagree.run.presets`): ``RunConfig(goal=G)`` is what
+    ``dopt train --goal G`` runs. The fields, by what they are for:
+
+    **The run**
 
     :param goal: The new goal word
-    :param env_id: Gymnasium id of the environment
-    :param mode: "kickstart" (the default: the new policy acts alone, distilled toward the priors' mixture on every
-        state with a weight annealed to zero, ``KICKSTART`` unless ``acer_kwargs`` say otherwise; of the modes
-        measured, the one whose saved policy works best on its own, docs/results.md), "disagreement" (the
-        paper's disagreement options), "room-sensor", "scratch", "finetune" (ACER from the most similar prior's
-        weights, no behaviour), "jsrl"
-        (Jump-Start RL: the priors guide each episode's first steps, fewer as the new policy succeeds) or
-        "ppo" (SB3's PPO from scratch, ``PPO_KWARGS``)
-    :param priors: "auto" (by similarity) or the goal labels of the priors
-    :param alpha: Disagreement window
-    :param beta: Disagreement threshold (>= 0)
-    :param entropy_offset: Entropy offset of the prior branch
+    :param env_id: Gymnasium id of the environment (a goal-navigation env of this package)
+    :param mode: "kickstart" (the default: the new policy acts alone and is distilled toward the priors' mixture,
+        then finished), "disagreement" (the paper's disagreement options), "room-sensor" (the oracle gate), "jsrl"
+        (the priors guide each episode's first steps), "finetune" (ACER from the nearest prior's weights),
+        "scratch" (ACER alone) or "ppo" (SB3's PPO alone); README's table says what each measured
+    :param priors: "auto" (the two nearest the goal in the embedding) or the goal labels of the priors
     :param steps: Env steps to train
-    :param seed: Seed
+    :param seed: Seed of the policy and the envs
     :param n_envs: Parallel envs
-    :param embedding: Word vectors file; None for the default
-    :param zoo: Zoo folder, or "greedy" for the shipped greedy zoo; None for the shipped one
-    :param acer_kwargs: ACER's hyperparameters, on top of the mode's defaults (``acer_defaults(mode)``); the
-        saved config holds them all
-    :param env_kwargs: The environment's keyword arguments besides the goal
-    :param eval_every: Evaluate the new policy alone (no priors, sampled actions) every this many env
-        steps, logged as ``eval/success_rate`` and kept in ``evaluations.npz``; 0 never
-    :param eval_episodes: Episodes per evaluation
-    :param vec_env: "dummy" (envs stepped in this process) or "subproc" (one process per env: their
-        rendering runs in parallel on several cores)
-    :param overlap: ACER's replay updates in a second thread while the next segment is collected (faster on two
-        cores). Off in the library and the experiments (the sequential loop their figures were made with); on in
-        dopt train
-    :param frame_stack: The new policy sees its last this many observations (its memory; 1: the current one; dopt
-        train: ``DOPT_TRAIN_FRAME_STACK`` with loop flags for a new kickstarting run on images);
-        each prior keeps the input it was trained on (its own stack if it has memory, else the observation)
-    :param loop_flags: The new policy's CNN sees the newest frame only, and the older frames of its stack give it
-        flags instead: whether the newest frame equals each of them (pressed against a wall, turning back and forth;
-        ``LoopFlagsCNN``). Needs ``frame_stack`` >= 2 and image observations (dopt train: on, with
-        ``DOPT_TRAIN_FRAME_STACK`` frames, for a new kickstarting run on images)
+
+    **The method**
+
+    :param alpha: Disagreement window
+    :param beta: Follow the priors while the window's mean disagreement is below this (>= 0)
+    :param entropy_offset: Enter the prior branch when ``U(0, 1) < H(pi) - entropy_offset``
     :param jsrl_horizon: Mode "jsrl": the guide's horizon at the start, in steps; 0 for the priors' mean
         episode length on their zoo cards
-    :param init: "scratch" (a fresh network) or "prior" (the most similar prior's architecture and weights, as
-        "finetune" does, for any mode: e.g. disagreement options with a new policy that starts as the prior)
-    :param record_trajectories: Write env 0's episodes (positions and per-step tags) to ``trajectories.jsonl``, for
-        the trajectory pictures (``dopt eval --trajectory``, Figure 5)
-    :param greedy_phase: The last this many env steps of the budget act by the new policy's argmax (with
-        probability greedy_epsilon a sample of it instead): the states where the greedy policy gets stuck are
-        visited and learned from (0: no such phase; dopt train: the harvest's steps for a new kickstarting run, so
-        that the harvested paths are the ones the saved model's argmax walks)
+    :param init: "scratch" (a fresh network) or "prior" (the nearest prior's architecture and weights, for any mode)
+    :param zoo: Zoo folder, "greedy" or "user"; None for the shipped one
+    :param embedding: Word vectors file; None for the default (MiniLM)
+
+    **Memory**
+
+    :param frame_stack: The new policy sees its last this many observations (1: the current one); each prior keeps
+        the input it was trained on
+    :param loop_flags: The new policy's CNN sees the newest frame, and flags say whether it equals each older frame
+        of its stack (pressed against a wall, turning back and forth; ``LoopFlagsCNN``); needs images
+
+    **The finish** (what makes the handed-over policy work greedily on its own)
+
+    :param consistency_harvest: ``model.zip`` is fitted to the loop-free paths of the training's own successful
+        episodes over its last this many env steps (all of them if the budget is smaller; no env step more; 0: none)
+    :param greedy_phase: The last this many env steps act by the new policy's argmax (``greedy_epsilon`` of its own
+        samples), so that the harvested paths are those the saved argmax walks (0: none)
     :param greedy_epsilon: The policy's own weight in the behaviour during the greedy phase, in (0, 1]
+    :param consistency_epochs: Passes over the harvest's labels
+    :param consistency_validation: The fit keeps the epoch whose greedy success over this many validation episodes
+        (env seeds of their own, cut at ``VALIDATION_MAX_STEPS``) is highest (0: the last epoch's)
+
+    **ACER**
+
+    :param acer_kwargs: ACER's keyword arguments on top of the mode's (``presets.acer_defaults``)
+    :param overlap: ACER's replay updates in a second thread while the next segment is collected (faster on two
+        cores); the experiments' grids pin the sequential loop their figures were made with
+    :param vec_env: "dummy" (envs stepped in this process) or "subproc" (one process per env)
+
+    **The environment**
+
+    :param env_kwargs: The environment's keyword arguments besides the goal
+
+    **Evaluation and logging**
+
+    :param eval_every: Evaluate the new policy alone, greedy and sampled, every this many env steps (0: never),
+        logged as ``eval/success_rate`` and kept in ``evaluations.npz``
+    :param eval_episodes: Episodes per evaluation
     :param checkpoint_every: Write a checkpoint (model, replay buffer, log positions) every this many env steps;
         0 only at the end
-    :param consistency_harvest: ``model.zip`` is fitted to the loop-free paths of the training's own successful
-        episodes over its last this many env steps (all of them if the budget is smaller; no env step more; 0: none;
-        dopt train: ``DOPT_TRAIN_HARVEST`` for mode kickstart)
-    :param consistency_epochs: Passes over the labels in the harvest's fit
-    :param consistency_validation: The harvest's fit is validated after every epoch, the new
-        policy acting greedily for this many episodes (env seeds of their own, cut at ``VALIDATION_MAX_STEPS``), and
-        keeps the weights of the epoch that validates best (0: none, the last epoch's; dopt train:
-        ``DOPT_TRAIN_VALIDATION`` for mode kickstart)
+    :param record_trajectories: Write env 0's training episodes (positions and per-step tags) to
+        ``trajectories.jsonl`` (Figure 5)
     """
 
     goal: str
     env_id: str = DEFAULT_ENV
     mode: str = "kickstart"
     priors: Any = "auto"
-    alpha: int = 10
-    beta: float = 0.1
-    entropy_offset: float = 0.1
     steps: int = 100_000
     seed: int = 0
     n_envs: int = 4
-    embedding: Optional[str] = None
+    alpha: int = 10
+    beta: float = 0.1
+    entropy_offset: float = 0.1
+    jsrl_horizon: int = 0
+    init: str = "scratch"
     zoo: Optional[str] = None
+    embedding: Optional[str] = None
+    frame_stack: Optional[int] = None
+    loop_flags: Optional[bool] = None
+    consistency_harvest: Optional[int] = None
+    greedy_phase: Optional[int] = None
+    greedy_epsilon: float = 0.2
+    consistency_epochs: int = 3
+    consistency_validation: Optional[int] = None
     acer_kwargs: dict[str, Any] = field(default_factory=dict)
+    overlap: Optional[bool] = None
+    vec_env: str = "dummy"
     env_kwargs: dict[str, Any] = field(default_factory=dict)
     eval_every: int = 0
     eval_episodes: int = 20
-    vec_env: str = "dummy"
-    overlap: bool = False
-    frame_stack: int = 1
-    loop_flags: bool = False
-    jsrl_horizon: int = 0
     checkpoint_every: int = 25_000
-    init: str = "scratch"
     record_trajectories: bool = False
-    greedy_phase: int = 0
-    greedy_epsilon: float = 0.2
-    consistency_harvest: int = 0
-    consistency_epochs: int = 3
-    consistency_validation: int = 0
 
     def __post_init__(self) -> None:
-        if isinstance(self.acer_kwargs, dict) and isinstance(self.mode, str):  # anything else: validate() says so
-            self.acer_kwargs = {**acer_defaults(self.mode), **self.acer_kwargs}
+        # What is not given comes from the mode's preset (hyperparams/modes.yml); anything mistyped, validate() says.
+        if isinstance(self.acer_kwargs, dict) and self.mode in MODES:
+            names = ("mode", "steps", "acer_kwargs", *RESOLVED)
+            resolved = resolve({k: getattr(self, k) for k in names}, image_observations(self.env_id)
+                               if isinstance(self.env_id, str) else False)
+            for name in names:
+                setattr(self, name, resolved[name])
 
     @classmethod
     def of_saved(cls, saved: dict[str, Any]) -> "RunConfig":
         """The configuration in a run's ``config.yaml`` (read as a mapping), without what the run added to it
-        (the chosen priors, their similarities, the steps taken)."""
-        return cls(**{k: v for k, v in saved.items() if k in cls.__dataclass_fields__})
+        (the chosen priors, their similarities, the steps taken). A setting the saved run does not name ran at
+        what the library had then: ``presets.RESOLVED``, and ACER's own default for an ACER setting."""
+        fields = {k: v for k, v in saved.items() if k in cls.__dataclass_fields__}
+        for name, old in RESOLVED.items():
+            if fields.get(name) is None:
+                fields[name] = old
+        if isinstance(fields.get("acer_kwargs"), dict):
+            mode = fields.get("mode", "kickstart")
+            later = {**acer_defaults(mode if mode in MODES else "all"), **preset(mode, "overlapped")}
+            fields["acer_kwargs"] = {**{k: acer_signature_defaults()[k] for k in later
+                                        if k not in fields["acer_kwargs"] and k in acer_signature_defaults()},
+                                     **fields["acer_kwargs"]}
+        return cls(**fields)
 
     def validate(self) -> None:
         self._check_types()
@@ -237,9 +229,14 @@ class RunConfig:
             value = getattr(self, name)
             if str(spec.type).startswith("dict") and not isinstance(value, dict):
                 raise ValueError(f"{name} must be a mapping, got {value!r}")
-            if spec.type not in kinds or (name in ("embedding", "zoo") and value is None):
+            kind = spec.type
+            if typing.get_origin(kind) is typing.Union:  # Optional[T]: None where not given (the preset's, resolved)
+                if value is None:
+                    continue
+                kind = next(t for t in typing.get_args(kind) if t is not type(None))
+            if kind not in kinds:
                 continue
-            allowed, what = kinds[spec.type]
+            allowed, what = kinds[kind]
             if (isinstance(value, bool) and bool not in allowed) or not isinstance(value, allowed):
                 raise ValueError(f"{name} must be {what}, got {value!r}")
         if not (self.priors == "auto" or (isinstance(self.priors, (list, tuple))

@@ -7,7 +7,7 @@ from pathlib import Path
 from typing import Any, Callable, Optional
 
 from sb3_disagree.acer import ACER
-from sb3_disagree.acer.consistency import RoundStats, greedy_consistency
+from sb3_disagree.finish.consistency import RoundStats, greedy_consistency
 from sb3_disagree.defaults import CONSISTENCY_SEED_OFFSET, VALIDATION_MAX_STEPS, VALIDATION_SEED_OFFSET
 from sb3_disagree.envs.vec import make_vec
 from sb3_disagree.files import write_atomic
@@ -44,7 +44,7 @@ def refine_run(run_dir: Path, rounds: int = 3, steps: int = 20_000, epochs: int 
                episodes: int = 100, force: bool = False, name: str = FOLDER,
                on_round: Optional[Callable[[RoundStats], None]] = None, sampling: str = "loops", trust: bool = False) -> dict[str, Any]:
     """
-    Run the greedy-consistency phase (:func:`~sb3_disagree.acer.consistency.greedy_consistency`) on a finished
+    Run the greedy-consistency phase (:func:`~sb3_disagree.finish.consistency.greedy_consistency`) on a finished
     ACER run's ``model.zip``, on env seeds of its own (the run's seed + ``CONSISTENCY_SEED_OFFSET``), and write the
     refined model and its evaluation alone (greedy and sampled, from the run's final-evaluation env seeds, as
     ``result.json`` and ``dopt eval``) to ``run_dir/<name>/`` (``consistent`` by default). The run's own files are not touched.

@@ -24,7 +24,3 @@ def run_logger(run_dir: Path, append: bool) -> Logger:
     csv = AppendingCSVOutputFormat(str(progress)) if append and progress.exists() else CSVOutputFormat(str(progress))
     return Logger(str(run_dir), [csv, make_output_format("tensorboard", str(run_dir))])
 
-
-def silent_logger() -> Logger:
-    """A logger that writes nothing: SB3's own default for ``verbose=0`` still makes an empty folder in the temp dir."""
-    return Logger(None, [])

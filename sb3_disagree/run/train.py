@@ -13,23 +13,24 @@ import shutil
 import time
 import zipfile
 from collections.abc import Callable
-from dataclasses import asdict, fields
+from dataclasses import asdict
 from pathlib import Path
-from typing import Optional
+from typing import Any, Optional
 
 import yaml
 from stable_baselines3.common.callbacks import BaseCallback, CallbackList
 
 from sb3_disagree.acer import ACER
-from sb3_disagree.behaviour import GreedyPhase, OnPolicyBehaviour
-from sb3_disagree.acer.consistency import HarvestLabels, RoundStats, greedy_consistency
+from sb3_disagree.behaviour import OnPolicyBehaviour
+from sb3_disagree.finish.greedy_phase import GreedyPhase
+from sb3_disagree.finish.consistency import HarvestLabels, RoundStats, greedy_consistency
 from sb3_disagree.allocator import keep_freed_memory
 from sb3_disagree.checkpoints import (BUFFER, Checkpoint, replace_model, resume_point, save_checkpoint,
                                       sigterm_as_interrupt, truncate_logs)
 from sb3_disagree.files import write_atomic
 from sb3_disagree.options import PriorSet, make_options
 from sb3_disagree.priors.select import choose_priors, guide_horizon
-from sb3_disagree.run.config import RunConfig, acer_defaults
+from sb3_disagree.run.config import RunConfig
 from sb3_disagree.run.envs import build_env
 from sb3_disagree.run.evaluation import EvaluateAlone, read_config
 from sb3_disagree.run.logs import run_logger
@@ -185,31 +186,25 @@ def _refine(config: RunConfig, run_dir: Path, model: ACER, saved_config: dict,
     return model, True
 
 
-def check_resume(config: RunConfig, resume: Path, force: bool = False) -> None:
+def check_resume(resume: Path, given: dict[str, Any], force: bool = False) -> None:
     """
-    A resumed run keeps its saved settings: a ValueError if ``config`` changes one of them (any field not at its
-    default besides the goal, the budget and the loop, or an ACER setting not at its
-    mode's), rather than dropping it silently.
+    A resumed run keeps its saved settings: a ValueError if ``given`` names one besides the goal, the budget and the
+    loop, rather than dropping it silently.
 
-    :param config: The settings asked for
     :param resume: The run folder to continue
+    :param given: The settings asked for (RunConfig's fields; ``acer_kwargs`` and ``env_kwargs`` by their keys)
     :param force: Whether replacing the run was asked for too (a contradiction)
     """
     if force:
         raise ValueError("--force replaces a run and --resume continues one: choose one")
     saved = read_config(Path(resume))
-    if saved.get("goal") != config.goal:
-        raise ValueError(f"{resume} trains the goal {saved.get('goal')!r}, not {config.goal!r}")
-    defaults = RunConfig(goal=config.goal)
+    if given.get("goal", saved["goal"]) != saved["goal"]:
+        raise ValueError(f"{resume} trains the goal {saved['goal']!r}, not {given['goal']!r}")
     # The loop (overlap) is the saved one whatever is asked; steps is the new budget.
-    given = [f.name for f in fields(RunConfig) if f.name not in ("goal", "steps", "overlap", "acer_kwargs")
-             and getattr(config, f.name) != getattr(defaults, f.name)]
-    # ACER's settings beyond the mode's defaults (on the command line, --reward-scale)
-    given += [key for key, value in config.acer_kwargs.items() if acer_defaults(config.mode).get(key) != value]
-    if given:
-        # env_kwargs come from the env's own flags (--collision-penalty, --reward-distance): name those given
-        given = [k for name in given for k in (config.env_kwargs if name == "env_kwargs" else [name])]
-        flags = ", ".join("--env" if name == "env_id" else "--" + name.replace("_", "-") for name in given)
+    names = [k for name, value in given.items() if name not in ("goal", "steps", "overlap")
+             for k in (value if name in ("acer_kwargs", "env_kwargs") else [name])]
+    if names:
+        flags = ", ".join("--env" if name == "env_id" else "--" + name.replace("_", "-") for name in names)
         raise ValueError(f"--resume continues {resume} with its saved settings; drop {flags}")
 
 

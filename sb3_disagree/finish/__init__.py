@@ -1,0 +1,12 @@
+"""
+The finish: what makes the policy a run hands over work greedily on its own, whatever the mode trained it. The greedy
+phase (``greedy_phase``: the last steps act by the argmax), the harvest of the run's own successful episodes and the
+validated fit of ``model.zip`` to their loop-free paths, and the greedy-consistency phase of ``dopt consistency`` and
+the priors (``consistency``). It observes the rollouts through the behaviour hook and a callback; ACER knows nothing of
+it.
+"""
+
+from sb3_disagree.finish.consistency import HarvestLabels, RoundStats, greedy_consistency
+from sb3_disagree.finish.greedy_phase import GreedyPhase
+
+__all__ = ["GreedyPhase", "HarvestLabels", "RoundStats", "greedy_consistency"]

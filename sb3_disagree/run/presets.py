@@ -1,0 +1,84 @@
+"""
+Each mode's settings as data (``hyperparams/modes.yml``), read here once, and the one function that resolves a run's
+settings from them: what a RunConfig is not given, it takes from its mode's preset.
+"""
+
+import functools
+from pathlib import Path
+from typing import Any, Optional
+
+import yaml
+
+PRESETS = Path(__file__).resolve().parents[1] / "hyperparams" / "modes.yml"
+# The RunConfig fields a preset may set, and what the library ran with before a preset set them (a saved config
+# without one of them ran with this).
+RESOLVED = {"overlap": False, "frame_stack": 1, "loop_flags": False, "consistency_harvest": 0, "greedy_phase": 0,
+            "consistency_validation": 0}
+
+
+@functools.lru_cache(maxsize=1)
+def presets() -> dict[str, dict[str, Any]]:
+    """The presets file, as written."""
+    return yaml.safe_load(PRESETS.read_text())
+
+
+def preset(mode: str, key: str) -> dict[str, Any]:
+    """One part of a mode's preset (``run``, ``images``, ``acer``, ``overlapped``, ``distill``, ``ppo``): the mode's
+    own on top of ``all``'s."""
+    data = presets()
+    return {**data["all"].get(key, {}), **data.get(mode, {}).get(key, {})}
+
+
+def acer_defaults(mode: str) -> dict[str, Any]:
+    """ACER's settings for a mode when a run names none (without those that depend on the loop)."""
+    return preset(mode, "acer")
+
+
+def resolve(fields: dict[str, Any], images: bool) -> dict[str, Any]:
+    """
+    A run's settings with what it was not given (None) taken from its mode's preset.
+
+    :param fields: RunConfig's fields as given: ``mode``, ``steps``, ``acer_kwargs`` and the fields of ``RESOLVED``
+        (None where not given)
+    :param images: Whether the env observes images (a preset's ``images`` part applies)
+    :return: Those fields resolved
+    """
+    mode = fields["mode"]
+    run = {**preset(mode, "run"), **(preset(mode, "images") if images else {})}
+    out = dict(fields)
+    given = {k for k in RESOLVED if fields.get(k) is not None}
+    for key in RESOLVED:
+        if key not in given and key not in ("greedy_phase", "consistency_validation", "frame_stack", "loop_flags"):
+            out[key] = run[key]
+    # Memory: loop flags need a stack, and a stack asked for alone is a plain one.
+    flags, stack = fields.get("loop_flags"), fields.get("frame_stack")
+    if flags is None:
+        flags = bool(run["loop_flags"]) and stack is None
+    if stack is None:
+        stack = (run["frame_stack"] if run["frame_stack"] > 1 else presets()["all"]["loop_flags_stack"]) if flags else 1
+    out["frame_stack"], out["loop_flags"] = stack, bool(flags)
+    # The greedy phase is the harvest's steps (capped at the budget); a fit is validated only where there is one.
+    if "greedy_phase" not in given:
+        phase = run["greedy_phase"]
+        out["greedy_phase"] = min(_int(out["consistency_harvest"]), _int(fields.get("steps"))) if phase == "harvest" else phase
+    if "consistency_validation" not in given:
+        out["consistency_validation"] = run["consistency_validation"] if out["consistency_harvest"] else 0
+    acer = dict(fields.get("acer_kwargs") or {})
+    defaults = {**acer_defaults(mode), **(preset(mode, "overlapped") if out["overlap"] else {})}
+    out["acer_kwargs"] = {**defaults, **acer}
+    return out
+
+
+@functools.lru_cache(maxsize=1)
+def acer_signature_defaults() -> dict[str, Any]:
+    """ACER's own keyword defaults (what a run that did not name a setting trained with)."""
+    import inspect
+
+    from sb3_disagree.acer import ACER
+
+    return {name: p.default for name, p in inspect.signature(ACER.__init__).parameters.items()
+            if p.default is not inspect.Parameter.empty and isinstance(p.default, (int, float, str, bool))}
+
+
+def _int(value: Optional[Any]) -> int:
+    return value if isinstance(value, int) and not isinstance(value, bool) else 0
