@@ -2,7 +2,7 @@
 `dopt train`'s default run (kickstarting, overlapped, three frames with loop flags, priors shower and toilet) timed
 two ways, in fresh processes taking turns so that the machine's slow spells fall on both; env steps/s after a
 warm-up and the process's minor page faults. Written into docs/benchmarks.md. ``--set allocator``: glibc's default
-settings against ``sb3_disagree.allocator.keep_freed_memory`` (what ``train`` applies); ``--set teacher``: the
+settings against ``sb3_disagree.run.allocator.keep_freed_memory`` (what ``train`` applies); ``--set teacher``: the
 kickstarting teacher computed at each step against once per rollout (``PriorTeacher``'s default), both with the
 allocator's settings; ``--set average-ahead``: ACER's ``average_ahead`` off and on.
 

@@ -23,7 +23,7 @@ import numpy as np
 
 
 def train(goal: str, seed: int, out: Path) -> None:
-    for name in ("sb3_disagree.run.consistency", "sb3_disagree.model_card", "sb3_disagree.callbacks",
+    for name in ("sb3_disagree.run.consistency", "sb3_disagree.model_card", "sb3_disagree.run.progress",
                  "sb3_disagree.run.evaluation", "sb3_disagree.evaluation", "sb3_disagree.finish.consistency",
                  "sb3_disagree.cli.app", "sb3_disagree.cli.train", "stable_baselines3.common.evaluation"):
         importlib.import_module(name)

@@ -91,10 +91,10 @@ HELPS = {
     "vec_env": "dummy (default) or subproc (a process per env).",
     "collision_penalty": "Subtracted from the reward on a blocked move (default 0).",
     "reward_distance": "euclidean (default) or geodesic: what the reward's distance follows.",
-    "eval_every": "Evaluate the policy alone every this many steps (default 0: never).",
+    "eval_every": "Evaluate the policy alone every this many steps (0: never).",
     "eval_episodes": "Episodes of each of those evaluations (default 20).",
-    "card_episodes": "Episodes each way of the model card's evaluation (default 20; 0: none).",
-    "checkpoint_every": "A checkpoint every this many env steps (default 25000; 0: at the end).",
+    "card_episodes": "Episodes each way of the card's evaluation (default 20).",
+    "checkpoint_every": "A checkpoint every this many steps (default 25000).",
     "record_trajectories": "Record env 0's training episodes (trajectories.jsonl).",
     "progress_every": "Seconds between progress lines off a terminal (default 30).",
     "out": "Root of the run folders.",
@@ -208,7 +208,7 @@ class _Display:
 
     def __enter__(self) -> BaseCallback:
         if not console.is_terminal:
-            from sb3_disagree.callbacks import ProgressLines
+            from sb3_disagree.run.progress import ProgressLines
 
             return ProgressLines(self.every)
         self.live = Live(console=console, refresh_per_second=2, transient=False)

@@ -10,7 +10,7 @@ import pytest
 CHURN = """
 import resource, sys
 import numpy as np
-from sb3_disagree.allocator import keep_freed_memory
+from sb3_disagree.run.allocator import keep_freed_memory
 if sys.argv[1] == "kept":
     assert keep_freed_memory() and keep_freed_memory()  # applied, and a second call is a no-op
 def churn():

@@ -71,3 +71,22 @@ def test_every_help_text_shows_whole():
     assert not swallowed, swallowed
     result = typer.testing.CliRunner().invoke(app, ["eval", "--help"], terminal_width=100)
     assert "(default: both, side by side;" in " ".join(result.output.replace("│", " ").split())
+
+
+def test_dopt_trains_help_is_in_panels_and_each_option_fits_two_lines():
+    """At 100 columns, every option of dopt train says what it does in at most two lines, in panels by purpose with
+    the run's essentials first."""
+    result = typer.testing.CliRunner().invoke(app, ["train", "--help"], terminal_width=100, env={"COLUMNS": "100"})
+    panels = [line.strip("╭─ ").split(" ─")[0] for line in result.output.splitlines() if line.startswith("╭─")]
+    assert panels[:2] in (["Run", "Method"], ["Options", "Run"]) and {"Memory", "Finish", "ACER"} <= set(panels)
+    rows, option = {}, None
+    for line in result.output.splitlines():
+        body = line.strip("│ ").rstrip()
+        if line.startswith("│") and body.startswith("--"):
+            option = body.split()[0]
+            rows[option] = 1
+        elif line.startswith("│") and option is not None and body:
+            rows[option] += 1
+        elif not line.startswith("│"):
+            option = None
+    assert len(rows) >= 35 and max(rows.values()) <= 2, {k: v for k, v in rows.items() if v > 2}

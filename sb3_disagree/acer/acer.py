@@ -174,28 +174,47 @@ class ACER(BaseAlgorithm):
         self.c = c
         self.trust_region = trust_region
         self.alpha = alpha
-        if not 0 <= ema_decay < 1:
-            raise ValueError(f"ema_decay must be in [0, 1), got {ema_decay}")
+        self.check_settings(reward_scale=reward_scale, ema_decay=ema_decay, distill_coef=distill_coef,
+                            distill_steps=distill_steps, distill_states=distill_states, features_dtype=features_dtype,
+                            overlap=overlap, average_ahead=average_ahead)
         self.ema_decay = ema_decay
         self.delta = delta
-        if distill_states not in ("followed", "all"):
-            raise ValueError(f"distill_states must be 'followed' or 'all', got {distill_states!r}")
-        if distill_coef < 0 or distill_steps < 0:
-            raise ValueError("distill_coef and distill_steps must be >= 0")
         as_schedule(ent_coef), as_schedule(learning_rate)  # refuse what is not a weight
-        if features_dtype not in (None, "float32", "bfloat16"):
-            raise ValueError(f"features_dtype must be 'float32', 'bfloat16' or None, got {features_dtype!r}")
         self.features_dtype = features_dtype
         self.distill_coef = distill_coef
         self.distill_steps = distill_steps
         self.distill_states = distill_states
         self.behaviour = behaviour
         self.overlap = overlap
-        if average_ahead and not overlap:
-            raise ValueError("average_ahead computes the replays' reference while the worker replays: it needs overlap")
         self.average_ahead = average_ahead
         if _init_setup_model:
             self._setup_model()
+
+    @staticmethod
+    def check_settings(reward_scale: Any = 1.0, ema_decay: Any = 0.0, distill_coef: Any = 0.0, distill_steps: Any = 0,
+                       distill_states: Any = "followed", features_dtype: Any = None, overlap: Any = False,
+                       average_ahead: Any = False, **_: Any) -> None:
+        """
+        Refuse settings ACER cannot train with, in one line that names the setting: the one check of them (a run's
+        configuration is checked with it before anything is written).
+        """
+        def number(value: Any) -> bool:
+            return isinstance(value, (int, float)) and not isinstance(value, bool)
+
+        if not number(reward_scale) or not reward_scale > 0:
+            raise ValueError(f"reward_scale must be a number > 0, got {reward_scale!r}")
+        if not number(ema_decay) or not 0 <= ema_decay < 1:
+            raise ValueError(f"ema_decay must be a number in [0, 1), got {ema_decay!r}")
+        if distill_states not in ("followed", "all"):
+            raise ValueError(f"distill_states must be followed or all, got {distill_states!r}")
+        if not number(distill_coef) or not number(distill_steps) or distill_coef < 0 or distill_steps < 0:
+            raise ValueError(f"distill_coef and distill_steps must be numbers >= 0, got {distill_coef!r} and "
+                             f"{distill_steps!r}")
+        if features_dtype not in (None, "float32", "bfloat16"):
+            raise ValueError(f"features_dtype must be float32 or bfloat16, got {features_dtype!r}")
+        if average_ahead and not overlap:
+            raise ValueError("average_ahead computes the replays' reference while the worker replays: it needs the "
+                             "overlapped loop (overlap)")
 
     def _setup_model(self) -> None:
         if isinstance(self.observation_space, spaces.Dict):

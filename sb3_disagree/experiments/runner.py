@@ -69,7 +69,7 @@ def train_and_evaluate(run: Run, folder: Path, source: Optional[Path] = None,
     start = time.perf_counter()
     callbacks = []
     if progress_every:
-        from sb3_disagree.callbacks import ProgressLines
+        from sb3_disagree.run.progress import ProgressLines
 
         callbacks.append(ProgressLines(progress_every, prefix=f"  {run.cell} seed {run.seed}: "))
     if source is not None:

@@ -202,17 +202,13 @@ class RunConfig:
         if unknown:
             raise ValueError(f"unknown ACER settings {', '.join(map(str, unknown))}: ACER takes "
                              f"{', '.join(sorted(acer_parameters()))}")
-        reward_scale = self.acer_kwargs.get("reward_scale", 1.0)
-        if isinstance(reward_scale, bool) or not isinstance(reward_scale, (int, float)) or not reward_scale > 0:
-            raise ValueError(f"--reward-scale must be a number > 0, got {reward_scale!r}")
-        if self.acer_kwargs.get("features_dtype") not in (None, "float32", "bfloat16"):
-            raise ValueError(f"--features-dtype must be float32 or bfloat16, got {self.acer_kwargs['features_dtype']!r}")
-        if self.acer_kwargs.get("average_ahead") and not self.overlap:
-            raise ValueError("--average-ahead computes the replays' reference while the worker replays: it needs "
-                             "the overlapped loop (drop --no-overlap)")
-        ema_decay = self.acer_kwargs.get("ema_decay", 0.0)
-        if isinstance(ema_decay, bool) or not isinstance(ema_decay, (int, float)) or not 0 <= ema_decay < 1:
-            raise ValueError(f"--ema-decay must be a number in [0, 1), got {ema_decay!r}")
+        from sb3_disagree.acer import ACER
+
+        try:  # ACER's own check, before anything is written; its message names the setting as the CLI spells it
+            ACER.check_settings(**{**self.acer_kwargs, "overlap": self.overlap})
+        except ValueError as exc:
+            name, rest = str(exc).split(" ", 1)
+            raise ValueError(f"--{name.replace('_', '-')} {rest}") from None
         if self.eval_every < 0 or self.eval_episodes < 1:
             raise ValueError("--eval-every must be >= 0 and --eval-episodes positive")
         penalty = self.env_kwargs.get("collision_penalty", 0.0)

@@ -24,7 +24,7 @@ from sb3_disagree.acer import ACER
 from sb3_disagree.behaviour import OnPolicyBehaviour
 from sb3_disagree.finish.greedy_phase import GreedyPhase
 from sb3_disagree.finish.consistency import HarvestLabels, RoundStats, greedy_consistency
-from sb3_disagree.allocator import keep_freed_memory
+from sb3_disagree.run.allocator import keep_freed_memory
 from sb3_disagree.checkpoints import (BUFFER, Checkpoint, replace_model, resume_point, save_checkpoint,
                                       sigterm_as_interrupt, truncate_logs)
 from sb3_disagree.files import write_atomic
