@@ -336,7 +336,7 @@ def test_average_ahead_replays_the_same_segments_with_the_reference_computed_bef
     assert len(plain_drawn) == len(ahead_drawn) and all(np.array_equal(a, b) for a, b in zip(plain_drawn, ahead_drawn))
     weights = [th.cat([p.detach().flatten() for p in m.policy.parameters()]) for m in (plain, ahead)]
     assert not th.equal(*weights)  # the older reference changes the steps
-    with pytest.raises(ValueError, match="needs overlap"):
+    with pytest.raises(ValueError, match="needs the overlapped loop"):
         ACER("MlpPolicy", make_vec_env(ChainEnv, n_envs=2, seed=0), average_ahead=True)
 
 
