@@ -3,7 +3,7 @@
 import re
 import shlex
 import subprocess
-import sys
+import warnings
 from pathlib import Path
 
 import pytest
@@ -18,7 +18,7 @@ STATE = "sb3_disagree/ApartmentState-v0"
 SUBSTITUTIONS = [
     (r"(dopt train --goal \w+)", rf"\1 --env {STATE} --steps 400 --n-envs 2 --card-episodes 1"),
     (r"sb3_disagree__Apartment-v0", "sb3_disagree__ApartmentState-v0"),
-    (r"--episodes 100", "--episodes 2"),
+    (r"--episodes \d+", "--episodes 2"),
     (r"(--video \S+)", r"\1 --video-episodes 1"),
     (r'"sb3_disagree/Apartment-v0"', f'"{STATE}"'),
     (r'RunConfig\(goal="bathtub"\)', f'RunConfig(goal="bathtub", env_id="{STATE}", steps=400, n_envs=2)'),
@@ -46,10 +46,10 @@ def test_every_block_of_the_readme_runs(tmp_path, monkeypatch):
     ran = 0
     for language, text in blocks():
         text = small(text, used)
-        if language == "python":
-            done = subprocess.run([sys.executable, "-W", "error::UserWarning", "-c", text], cwd=tmp_path,
-                                  capture_output=True, text=True, timeout=300)
-            assert done.returncode == 0, (text, done.stderr[-3000:])
+        if language == "python":  # in this process (the imports are paid once), warnings as errors
+            with warnings.catch_warnings():
+                warnings.simplefilter("error", UserWarning)
+                exec(compile(text, str(README), "exec"), {"__name__": "readme"})
         elif language == "bash" and commands(text)[0].startswith(ELSEWHERE):
             continue
         elif language == "bash":
