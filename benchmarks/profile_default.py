@@ -64,7 +64,7 @@ TIMES: dict[str, float] = defaultdict(float)
 
 
 def wrap_all(times: dict) -> None:
-    wrap(times, "env step (render + physics)", DummyVecEnv, "step")
+    wrap(times, "env step (render + physics)", DummyVecEnv, "step_wait")
     wrap(times, "acting: the policy's forward", ACERPolicy, "action_probs")
     wrap(times, "behaviour (the priors' teacher)", PriorTeacher, "__call__")
     wrap(times, "behaviour (the priors' teacher)", PriorTeacher, "rollout_teacher")
