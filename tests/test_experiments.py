@@ -388,7 +388,7 @@ def test_shipped_grids_still_make_their_committed_runs():
     from dataclasses import asdict
     from pathlib import Path
 
-    from sb3_disagree.run.presets import RESOLVED, acer_signature_defaults
+    from sb3_disagree.run.presets import RESOLVED, acer_signature_defaults, trained_with
 
     results = Path(__file__).resolve().parents[1] / "benchmarks" / "results" / "experiments"
     acer, compared = acer_signature_defaults(), 0
@@ -398,12 +398,13 @@ def test_shipped_grids_still_make_their_committed_runs():
             saved_path = results / experiment.name / run.cell / f"seed-{run.config.seed}" / "result.json"
             if not saved_path.exists() or experiment.continues:  # a continuation keeps its run's saved settings
                 continue
-            saved, now = json.loads(saved_path.read_text())["config"], asdict(run.config)
-            # a setting newer than the record: the record ran at ACER's default
-            assert {**acer, **saved["acer_kwargs"]} == {**acer, **now["acer_kwargs"]}, (experiment.name, run.cell)
+            record, now = json.loads(saved_path.read_text())["config"], asdict(run.config)
+            # a setting newer than the record ran at what the library had then (ACER's default, the mode's distillation)
+            saved = trained_with(record, {})
+            assert saved["acer_kwargs"] == {**acer, **now["acer_kwargs"]}, (experiment.name, run.cell)
             assert saved["mode"] == now["mode"]
             # what a mode's preset resolves: the saved value, or what the library ran with before it was saved
-            assert {k: saved.get(k, old) for k, old in RESOLVED.items()} == {k: now[k] for k in RESOLVED}, (
+            assert {k: saved[k] for k in RESOLVED} == {k: now[k] for k in RESOLVED}, (
                 experiment.name, run.cell)
             compared += 1
     assert compared >= 170  # the grids behind the results page

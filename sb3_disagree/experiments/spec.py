@@ -41,7 +41,7 @@ import yaml
 
 from sb3_disagree.files import safe_name
 from sb3_disagree.run import RunConfig, acer_defaults
-from sb3_disagree.run.presets import acer_signature_defaults
+from sb3_disagree.run.presets import acer_signature_defaults, trained_with
 
 # Experiments shipped with the repository; a path to any YAML file works too.
 SHIPPED = Path(__file__).resolve().parents[1] / "data" / "experiments"
@@ -54,12 +54,10 @@ def _differing(saved: dict[str, Any], config: RunConfig, ignore: tuple[str, ...]
     """The RunConfig fields in which a saved run's settings differ from ``config`` (a field newer than the
     record ran at its default), leaving out ``ignore`` and what only changes the output."""
     defaults = {k: f.default for k, f in RunConfig.__dataclass_fields__.items() if f.default is not MISSING}
+    saved = trained_with(saved, defaults)  # what the record ran with where it does not name a setting
     wanted = asdict(config)
-    if isinstance(saved.get("acer_kwargs"), dict):  # likewise an ACER setting: the record ran at ACER's default
-        acer = acer_signature_defaults()
-        saved = {**saved, "acer_kwargs": {**acer, **saved["acer_kwargs"]}}
-        wanted["acer_kwargs"] = {**acer, **wanted["acer_kwargs"]}
-    return [k for k in wanted if k not in (*ignore, *OUTPUT_ONLY) and saved.get(k, defaults.get(k)) != wanted[k]]
+    wanted["acer_kwargs"] = {**acer_signature_defaults(), **wanted["acer_kwargs"]}
+    return [k for k in wanted if k not in (*ignore, *OUTPUT_ONLY) and saved.get(k) != wanted[k]]
 
 
 @dataclass

@@ -1,17 +1,17 @@
 """A run's configuration: ``RunConfig`` (saved as the run's ``config.yaml``) and the defaults of each mode."""
 
 import typing
-from dataclasses import dataclass, field
+from dataclasses import MISSING, dataclass, field
 from pathlib import Path
 from typing import Any, Optional
 
 from sb3_disagree.defaults import DEFAULT_ENV
 from sb3_disagree.files import safe_name
 from sb3_disagree.options import MODES
-from sb3_disagree.run.presets import RESOLVED, acer_defaults, acer_signature_defaults, preset, resolve
+from sb3_disagree.run.presets import RESOLVED, acer_defaults, acer_parameters, preset, resolve, trained_with
 
 # Each mode's settings live in hyperparams/modes.yml (run/presets.py); these names read them.
-KICKSTART: dict[str, Any] = preset("kickstart", "distill")
+KICKSTART: dict[str, Any] = {k: v for k, v in preset("kickstart", "acer").items() if k.startswith("distill")}
 PPO_KWARGS: dict[str, Any] = preset("ppo", "ppo")
 ACER_KWARGS: dict[str, Any] = preset("all", "acer")
 MAX_STEPS = 10**9  # a budget beyond this is a typo: a billion env steps is weeks on the machines this runs on
@@ -132,16 +132,8 @@ class RunConfig:
         """The configuration in a run's ``config.yaml`` (read as a mapping), without what the run added to it
         (the chosen priors, their similarities, the steps taken). A setting the saved run does not name ran at
         what the library had then: ``presets.RESOLVED``, and ACER's own default for an ACER setting."""
-        fields = {k: v for k, v in saved.items() if k in cls.__dataclass_fields__}
-        for name, old in RESOLVED.items():
-            if fields.get(name) is None:
-                fields[name] = old
-        if isinstance(fields.get("acer_kwargs"), dict):
-            mode = fields.get("mode", "kickstart")
-            later = {**acer_defaults(mode if mode in MODES else "all"), **preset(mode, "overlapped")}
-            fields["acer_kwargs"] = {**{k: acer_signature_defaults()[k] for k in later
-                                        if k not in fields["acer_kwargs"] and k in acer_signature_defaults()},
-                                     **fields["acer_kwargs"]}
+        defaults = {k: f.default for k, f in cls.__dataclass_fields__.items() if f.default is not MISSING}
+        fields = {k: v for k, v in trained_with(saved, defaults).items() if k in cls.__dataclass_fields__}
         return cls(**fields)
 
     def validate(self) -> None:
@@ -241,16 +233,6 @@ class RunConfig:
 
     def run_dir(self, out: Path) -> Path:
         return out / self.env_id.replace("/", "__") / self.goal / f"{self.mode}-{self.seed}"
-
-
-def acer_parameters() -> set[str]:
-    """The keyword arguments ACER takes beyond the policy, the env and what a run sets itself."""
-    import inspect
-
-    from sb3_disagree.acer import ACER
-
-    return set(inspect.signature(ACER.__init__).parameters) - {"self", "policy", "env", "behaviour", "seed", "overlap",
-                                                                "kwargs", "_init_setup_model", "device"}
 
 
 def image_observations(env_id: str) -> bool:

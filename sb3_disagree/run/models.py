@@ -7,7 +7,7 @@ from sb3_disagree.acer import ACER
 from sb3_disagree.acer.torch_layers import loop_flags_kwargs
 from sb3_disagree.acer.transfer import load_prior_weights, transfer_kwargs
 from sb3_disagree.options import PriorSet
-from sb3_disagree.run.config import KICKSTART, PPO_KWARGS, RunConfig
+from sb3_disagree.run.config import PPO_KWARGS, RunConfig
 
 def algorithm_of(mode: str) -> type:
     """The SB3 algorithm class a mode trains: PPO for "ppo", ACER for every other."""
@@ -56,8 +56,6 @@ def new_model(config: RunConfig, env, behaviour, priors: Optional[PriorSet]):
         kwargs = {k: v for k, v in PPO_KWARGS.items() if k not in ("learning_rate", "clip_range")}
         return PPO(policy, env, seed=config.seed, **ppo_schedules(), **kwargs)
     acer_kwargs = dict(config.acer_kwargs)
-    if config.mode == "kickstart":
-        acer_kwargs = {**KICKSTART, **acer_kwargs}
     policy_kwargs = dict(acer_kwargs.pop("policy_kwargs", {}))
     from_prior = config.mode == "finetune" or config.init == "prior"
     if from_prior:  # the most similar prior's architecture, and below its weights

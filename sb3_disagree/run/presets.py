@@ -23,8 +23,8 @@ def presets() -> dict[str, dict[str, Any]]:
 
 
 def preset(mode: str, key: str) -> dict[str, Any]:
-    """One part of a mode's preset (``run``, ``images``, ``acer``, ``overlapped``, ``distill``, ``ppo``): the mode's
-    own on top of ``all``'s."""
+    """One part of a mode's preset (``run``, ``images``, ``acer``, ``overlapped``, ``ppo``): the mode's own on top of
+    ``all``'s."""
     data = presets()
     return {**data["all"].get(key, {}), **data.get(mode, {}).get(key, {})}
 
@@ -69,15 +69,50 @@ def resolve(fields: dict[str, Any], images: bool) -> dict[str, Any]:
     return out
 
 
+# Kickstarting's distillation, which runs saved before the presets got from the code rather than their config.yaml.
+DISTILL = ("distill_coef", "distill_steps", "distill_states")
+
+
+def trained_with(saved: dict[str, Any], field_defaults: dict[str, Any]) -> dict[str, Any]:
+    """
+    A saved run's settings completed with what the library ran it with where the record does not name one (a setting
+    newer than the record): ``RESOLVED`` for the fields a preset sets, ``field_defaults`` for the others, ACER's own
+    defaults for its settings, and for a kickstarting run the distillation its mode applied.
+
+    :param saved: A run's ``config.yaml`` (or ``result.json``'s ``config``)
+    :param field_defaults: RunConfig's own defaults of its other fields
+    """
+    out = {**field_defaults, **{k: v for k, v in saved.items() if v is not None or k not in RESOLVED}}
+    for name, old in RESOLVED.items():
+        if out.get(name) is None:
+            out[name] = old
+    if isinstance(saved.get("acer_kwargs"), dict):
+        implicit = {k: preset("kickstart", "acer")[k] for k in DISTILL} if saved.get("mode") == "kickstart" else {}
+        out["acer_kwargs"] = {**acer_signature_defaults(), **implicit, **saved["acer_kwargs"]}
+    return out
+
+
+@functools.lru_cache(maxsize=1)
+def acer_parameters() -> frozenset[str]:
+    """The keyword arguments of ACER a run's ``acer_kwargs`` may set (not the policy, the env, the behaviour, the
+    seed, the loop or the device, which the run sets itself)."""
+    import inspect
+
+    from sb3_disagree.acer import ACER
+
+    return frozenset(inspect.signature(ACER.__init__).parameters) - {
+        "self", "policy", "env", "behaviour", "seed", "overlap", "kwargs", "_init_setup_model", "device"}
+
+
 @functools.lru_cache(maxsize=1)
 def acer_signature_defaults() -> dict[str, Any]:
-    """ACER's own keyword defaults (what a run that did not name a setting trained with)."""
+    """ACER's own defaults of those settings (what a run that did not name one trained with)."""
     import inspect
 
     from sb3_disagree.acer import ACER
 
     return {name: p.default for name, p in inspect.signature(ACER.__init__).parameters.items()
-            if p.default is not inspect.Parameter.empty and isinstance(p.default, (int, float, str, bool))}
+            if name in acer_parameters() and isinstance(p.default, (int, float, str, bool))}
 
 
 def _int(value: Optional[Any]) -> int:
