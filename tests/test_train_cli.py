@@ -202,7 +202,7 @@ def test_average_ahead_reaches_acer_and_needs_the_overlapped_loop(zoo, tmp_path)
 
 
 def test_reward_scale_and_ema_decay_reach_acer_and_keep_the_other_defaults(zoo, tmp_path):
-    from sb3_disagree.run import ACER_KWARGS
+    from sb3_disagree.run import ACER_KWARGS, KICKSTART
 
     result = runner.invoke(app, _train_args(zoo, tmp_path, "--mode", "kickstart", "--reward-scale", "1",
                                             "--ema-decay", "0.99", "--collision-penalty", "0.1",
@@ -210,8 +210,8 @@ def test_reward_scale_and_ema_decay_reach_acer_and_keep_the_other_defaults(zoo, 
     assert result.exit_code == 0, result.output
     run = tmp_path / "sb3_disagree__ApartmentState-v0" / "bathtub" / "kickstart-0"
     saved = yaml.safe_load((run / "config.yaml").read_text())
-    assert saved["acer_kwargs"] == {**ACER_KWARGS, "reward_scale": 1.0, "ema_decay": 0.99,
-                                   "average_ahead": True}  # dopt train's default for kickstarting
+    assert saved["acer_kwargs"] == {**ACER_KWARGS, **KICKSTART, "reward_scale": 1.0, "ema_decay": 0.99,
+                                   "average_ahead": True}  # kickstarting's preset, saved whole
     assert saved["env_kwargs"] == {"collision_penalty": 0.1, "reward_distance": "geodesic"}
     model = ACER.load(run / "model.zip")
     assert model.reward_scale == 1.0 and model.ema_decay == 0.99 and model.policy.ema_net is not None
