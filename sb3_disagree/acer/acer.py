@@ -1,7 +1,6 @@
 """ACER: Sample Efficient Actor-Critic with Experience Replay (Wang et al. 2016), discrete actions."""
 
 import contextlib
-import io
 import pathlib
 import zipfile
 from typing import Any, Callable, ClassVar, Optional, TypeVar, Union

@@ -31,7 +31,6 @@ copied (runs are deterministic given their configuration and seed) instead of tr
 another configuration is an error, and one not finished yet is trained here.
 """
 
-import inspect
 import json
 from dataclasses import MISSING, asdict, dataclass, field
 from pathlib import Path

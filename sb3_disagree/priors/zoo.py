@@ -12,7 +12,6 @@ import json
 import os
 import shutil
 import tempfile
-import zipfile
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any, Optional, Union
@@ -257,7 +256,7 @@ class Zoo:
                 problem = "no model.zip"
             elif sha256_of(goal_dir / MODEL) != card.sha256:
                 problem = "model.zip does not match the card's sha256 (corrupt or replaced)"
-            elif (self.trusted is not None and self.root not in (DEFAULT_ZOO, *SHIPPED_ZOOS.values())
+            elif (self.trusted is not None and not is_shipped(self.root)
                   and card.sha256 not in self.trusted):
                 problem = "model.zip is not on the trust list"
         return Entry(goal_dir, env_id, card.goal if card else goal_dir.name, card, problem)
