@@ -54,7 +54,7 @@ PANELS = {
     "Run": ("goal", "env_id", "mode", "priors", "steps", "seed", "n_envs", "out", "resume", "force", "trust"),
     "Method": ("alpha", "beta", "entropy_offset", "jsrl_horizon", "init", "zoo", "embedding"),
     "Memory": ("frame_stack", "loop_flags"),
-    "Finish": ("consistency_harvest", "greedy_phase", "greedy_epsilon", "consistency_epochs",
+    "Finish": ("finish", "consistency_harvest", "greedy_phase", "greedy_epsilon", "consistency_epochs",
                "consistency_validation"),
     "ACER": ("reward_scale", "ema_decay", "average_ahead", "features_dtype", "overlap", "vec_env"),
     "Environment": ("collision_penalty", "reward_distance"),
@@ -64,7 +64,8 @@ PANELS = {
 HELPS = {
     "goal": "The new goal word (with --resume: the run's own).",
     "env_id": "Gymnasium id of a navigation env (default sb3_disagree/Apartment-v0).",
-    "mode": "kickstart (default), disagreement, room-sensor, jsrl, finetune, scratch or ppo (README).",
+    "mode": "kickstart (default), disagreement, disagreement-distill, room-sensor, jsrl, finetune, scratch or ppo.",
+    "finish": "--bare: the mode without the finish, as the paper ran it (default: finished, ppo bare).",
     "priors": "auto (the two nearest the goal in the embedding), or their goals: a,b.",
     "steps": "Env steps to train (default 100000; with --resume, the new total).",
     "seed": "Seed of the policy and the envs (default 0).",
@@ -122,7 +123,7 @@ def _run_options() -> list:
         if kind in (Optional[typing.Any],):
             kind = Optional[str]
         flag = "--env" if name == "env_id" else "--" + name.replace("_", "-")
-        decls = f"{flag}/--no-{flag[2:]}" if name in BOOLS else flag
+        decls = "--finish/--bare" if name == "finish" else f"{flag}/--no-{flag[2:]}" if name in BOOLS else flag
         default = p.default.default if name in ("out", "force", "trust", "resume") else None
         option = typer.Option(default, *([decls] if name not in ("force", "trust") else [flag]), help=HELPS[name],
                               rich_help_panel=panel_of[name], show_default=name == "out")

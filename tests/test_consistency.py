@@ -356,7 +356,7 @@ def _probs(model, obs):
 
 def test_dopt_train_fits_model_zip_to_the_harvest_of_its_own_episodes(tmp_path):
     base = ["train", "--goal", "bathtub", "--env", "sb3_disagree/ApartmentState-v0", "--mode", "scratch", "--steps",
-            "600", "--n-envs", "2", "--card-episodes", "0", "--out", str(tmp_path)]
+            "600", "--n-envs", "2", "--card-episodes", "0", "--out", str(tmp_path), "--bare"]  # each part as asked
     for bad in (["--consistency-harvest", "-1"],
                 ["--mode", "ppo", "--consistency-harvest", "100"], ["--consistency-validation", "5"],
                 ["--consistency-harvest", "100", "--consistency-epochs", "0"]):
@@ -395,7 +395,7 @@ def test_dopt_train_says_so_when_its_harvest_has_nothing_to_fit(tmp_path):
 
 def test_dopt_train_validates_the_harvest_fit_epoch_by_epoch(tmp_path):
     base = ["train", "--goal", "bathtub", "--env", "sb3_disagree/ApartmentState-v0", "--mode", "scratch", "--steps",
-            "600", "--n-envs", "2", "--card-episodes", "0", "--out", str(tmp_path)]
+            "600", "--n-envs", "2", "--card-episodes", "0", "--out", str(tmp_path), "--bare"]  # each part as asked
     for bad in (["--consistency-harvest", "600", "--consistency-validation", "-1"],
                 ["--consistency-validation", "4"]):  # nothing to validate without a fit
         result = runner.invoke(app, [*base, *bad])

@@ -3,6 +3,7 @@
 import json
 import shutil
 import tempfile
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -33,7 +34,8 @@ def zoo(tmp_path_factory):
 def _grid(tmp_path, zoo, name="tiny", seeds=(0, 1)):
     spec = {"name": name, "goal": "bathtub", "env_id": STATE_ID, "priors": ["shower", "toilet"], "steps": 320,
             "seeds": list(seeds), "budgets": [160, 320], "final_episodes": 2, "trajectories": True,
-            "run": {"n_envs": 2, "zoo": str(zoo), "eval_every": 160, "eval_episodes": 1}, "acer": {"replay_start": 80},
+            "run": {"n_envs": 2, "zoo": str(zoo), "eval_every": 160, "eval_episodes": 1, "finish": False},
+            "acer": {"replay_start": 80},
             "cells": {"disagreement": {"mode": "disagreement"}, "beta-big": {"mode": "disagreement", "beta": 100.0},
                       "scratch": {"mode": "scratch"}}}
     path = tmp_path / f"{name}.yaml"
@@ -437,3 +439,20 @@ def test_every_cell_of_a_figure_has_its_own_colour(n):
 def test_cell_colours_repeat_only_past_sixty():
     colors = cell_colors(61)
     assert len(set(colors)) == 60 and colors[60] == colors[0]
+
+
+def test_every_shipped_grid_resolves_to_the_settings_its_committed_runs_were_made_with():
+    """A preset that changes (a mode's default, the finish) must not change what a shipped grid would run: each
+    committed run's saved configuration equals its grid's, field by field."""
+    from sb3_disagree.experiments.spec import SHIPPED, _differing, load_experiment
+
+    results = Path(__file__).resolve().parents[1] / "benchmarks" / "results" / "experiments"
+    checked = 0
+    for grid in sorted(SHIPPED.glob("*.yaml")):
+        folder = results / grid.stem
+        for run in load_experiment(grid.stem).runs():
+            saved = run.folder(folder) / "result.json"
+            if saved.exists():
+                assert _differing(json.loads(saved.read_text())["config"], run.config) == [], (grid.stem, run.cell)
+                checked += 1
+    assert checked >= 180

@@ -323,3 +323,41 @@ def test_a_rollouts_teachers_computed_at_once_equal_those_computed_at_each_step(
     np.testing.assert_array_equal(actions, same_actions)
     assert at_once.any() and np.allclose(at_once.sum(-1), 1.0)
     np.testing.assert_allclose(at_once, per_step, atol=1e-6)
+
+
+@pytest.mark.parametrize("states", ["followed", "all"])
+def test_disagreement_distills_toward_the_priors_mixture_on_the_steps_configured(states, monkeypatch):
+    """Mode disagreement-distill: Algorithm 1's behaviour, and ACER's distillation term toward the priors' mixture on
+    the steps where the priors chose the action ("followed") or on every step ("all"), against a hand computation."""
+    import sb3_disagree.acer.acer as acer_module
+    from sb3_disagree.options import DisagreementOptions, PriorSet
+
+    env = make_vec_env(CueEnv, n_envs=2, seed=0)
+    priors = PriorSet([ACER("MlpPolicy", env, seed=1), ACER("MlpPolicy", env, seed=2)])
+    steps, calls = [], []
+
+    class Recording(DisagreementOptions):
+        def __call__(self, *args):
+            steps.append(super().__call__(*args))
+            return steps[-1]
+
+    behaviour = Recording(priors, alpha=2, beta=10.0, entropy_offset=0.35, seed=0)  # the priors always agree
+    original = acer_module.distillation_loss
+
+    def capture(log_probs, teacher, weights):
+        calls.append((log_probs.detach().clone(), teacher.clone(), weights.clone()))
+        return original(log_probs, teacher, weights)
+
+    monkeypatch.setattr(acer_module, "distillation_loss", capture)
+    model = ACER("MlpPolicy", env, n_steps=8, replay_ratio=0, distill_coef=1.0, distill_states=states, seed=3,
+                 behaviour=behaviour)
+    model.learn(16)  # one segment of 8 steps x 2 envs, one on-policy update
+    log_probs, teacher, weights = calls[0]
+    followed = np.concatenate([s.followed for s in steps[:8]])
+    mixture = th.cat([th.as_tensor(s.teacher) for s in steps[:8]])
+    assert 0 < followed.sum() < len(followed)  # the entropy branch followed the priors at some steps, not all
+    np.testing.assert_allclose(teacher.numpy(), mixture.numpy(), atol=1e-6)
+    np.testing.assert_array_equal(weights.numpy(), followed if states == "followed" else np.ones_like(followed))
+    # L = (1/N) sum_t w_t * -(sum_a teacher_t(a) log pi_t(a)), by hand over the kept steps
+    by_hand = sum(-(mixture[t] * log_probs[t]).sum().item() for t in range(16) if states == "all" or followed[t]) / 16
+    assert original(log_probs, teacher, weights).item() == pytest.approx(by_hand, abs=1e-5)

@@ -10,6 +10,7 @@ from typer.testing import CliRunner
 import sb3_disagree.envs  # noqa: F401
 from sb3_disagree import ACER
 from sb3_disagree.cli.app import app
+from sb3_disagree.options import MODES
 from sb3_disagree.run import RunConfig, train
 
 STATE_ID = "sb3_disagree/ApartmentState-v0"
@@ -31,9 +32,9 @@ def _train_args(zoo, out, *extra):
             "--n-envs", "2", *(() if "--mode" in extra else ("--mode", "disagreement")), *extra]
 
 
-@pytest.mark.parametrize("mode", ["disagreement", "room-sensor", "scratch", "finetune", "kickstart", "jsrl", "ppo"])
-def test_train_writes_the_run_folder(zoo, tmp_path, mode):
-    result = runner.invoke(app, _train_args(zoo, tmp_path, "--mode", mode))
+@pytest.mark.parametrize("mode,bare", [(m, False) for m in MODES] + [("disagreement", True), ("kickstart", True)])
+def test_train_writes_the_run_folder(zoo, tmp_path, mode, bare):
+    result = runner.invoke(app, _train_args(zoo, tmp_path, "--mode", mode, *(["--bare"] if bare else [])))
     assert result.exit_code == 0, result.output
     run = tmp_path / "sb3_disagree__ApartmentState-v0" / "bathtub" / f"{mode}-0"
     for name in ["model.zip", "config.yaml", "progress.csv"]:
@@ -41,13 +42,19 @@ def test_train_writes_the_run_folder(zoo, tmp_path, mode):
     assert list((run / "monitor").glob("*.monitor.csv")) and list(run.glob("events.out.tfevents*"))
     cfg = yaml.safe_load((run / "config.yaml").read_text())
     assert cfg["finished"] and cfg["num_timesteps"] >= 400
-    # dopt train's default harvest (all 400 steps here), acted greedily by the current weights: kickstarting only
-    assert (cfg["consistency_harvest"], cfg["greedy_phase"]) == ((30_000, 400) if mode == "kickstart" else (0, 0))
-    assert cfg["consistency_validation"] == (40 if mode == "kickstart" else 0)  # the harvest's fit, validated
-    # the replays' reference computed ahead: a new kickstarting run's default, in the overlapped loop dopt train runs
-    assert cfg["acer_kwargs"].get("average_ahead", False) is (mode == "kickstart")
-    assert ("harvest" in (cfg.get("consistency") or {})) == (mode == "kickstart")
+    # Every ACER mode is finished unless bare: the harvest (all 400 steps here) acted greedily by the current
+    # weights, its fit validated, the moving average acted with; ppo has no finish.
+    finished = mode != "ppo" and not bare
+    assert cfg["finish"] is finished
+    assert (cfg["consistency_harvest"], cfg["greedy_phase"]) == ((30_000, 400) if finished else (0, 0))
+    assert cfg["consistency_validation"] == (40 if finished else 0)
+    assert cfg["acer_kwargs"].get("ema_decay", 0.0) == (0.999 if finished else 0.0)
+    assert ("harvest" in (cfg.get("consistency") or {})) is finished
+    # the replays' reference computed ahead: the overlapped loop's default in every mode
+    assert cfg["acer_kwargs"].get("average_ahead", False) is True
     assert (cfg["frame_stack"], cfg["loop_flags"]) == (1, False)  # state observations: no frames to compare
+    distilled = mode in ("kickstart", "disagreement-distill")
+    assert cfg["acer_kwargs"].get("distill_coef", 0.0) == (1.0 if distilled else 0.0)
     if mode == "finetune":  # started from the nearest prior: its policy head, a Q head of its own
         prior = ACER.load(zoo / "sb3_disagree__ApartmentState-v0" / "shower" / "model.zip")
         assert ACER.load(run / "model.zip").policy.net_arch == prior.policy.net_arch
@@ -55,8 +62,8 @@ def test_train_writes_the_run_folder(zoo, tmp_path, mode):
         assert "priors: shower" in result.output and cfg["chosen_priors"] == ["shower", "toilet"]
         header = (run / "progress.csv").read_text().splitlines()[0]
         assert ("prior/usage" in header) == (mode != "kickstart") and "behaviour/" in header
-        assert ("prior/disagreement" in header) == (mode == "disagreement")
-        assert ("train/distill_loss" in header) == (mode == "kickstart")
+        assert ("prior/disagreement" in header) == mode.startswith("disagreement")
+        assert ("train/distill_loss" in header) == distilled
         assert ("jsrl/horizon" in header) == (mode == "jsrl")
     # The trained model opens with plain SB3 tools, no priors or zoo needed.
     from sb3_disagree.run import algorithm_of
@@ -85,7 +92,10 @@ def test_the_default_harvest_gives_way_to_the_options_given(zoo, tmp_path):
     ({"greedy_phase": 0}, "kickstart", None, (30_000, 0, 40)),  # a harvest sampled as training samples
     ({"greedy_phase": 5_000}, "kickstart", None, (30_000, 5_000, 40)),
     ({"consistency_validation": 0}, "kickstart", None, (30_000, 30_000, 0)),  # the last epoch's weights
-    ({}, "disagreement", None, (0, 0, 0)),  # not measured there
+    ({}, "disagreement", None, (30_000, 30_000, 40)),  # every ACER mode is finished
+    ({"finish": False}, "disagreement", None, (0, 0, 0)),  # bare: as the paper's figures ran
+    ({"finish": False, "consistency_harvest": 200}, "scratch", None, (200, 0, 0)),  # a part of it asked for
+    ({}, "ppo", None, (0, 0, 0)),  # no finish for SB3's PPO
     ({}, "kickstart", "RUN", (0, 0, 0)),  # a resumed run keeps its saved settings
 ])
 def test_the_default_harvest_gives_way_to_the_options_given_each(given, mode, resume, expected):
@@ -98,7 +108,8 @@ def test_the_default_harvest_gives_way_to_the_options_given_each(given, mode, re
 @pytest.mark.parametrize("given,env,mode,resume,expected", [
     ({}, "sb3_disagree/Apartment-v0", "kickstart", None, (3, True)),  # dopt train's default memory
     ({}, STATE_ID, "kickstart", None, (1, False)),  # no frames to compare
-    ({}, "sb3_disagree/Apartment-v0", "disagreement", None, (1, False)),  # not measured there
+    ({}, "sb3_disagree/Apartment-v0", "disagreement", None, (3, True)),  # every ACER mode is finished
+    ({"finish": False}, "sb3_disagree/Apartment-v0", "disagreement", None, (1, False)),  # bare
     ({}, "sb3_disagree/Apartment-v0", "kickstart", "RUN", (1, False)),  # a resumed run keeps its saved memory
     ({"frame_stack": 4}, "sb3_disagree/Apartment-v0", "kickstart", None, (4, False)),  # a plain stack asked for
     ({"loop_flags": False}, "sb3_disagree/Apartment-v0", "kickstart", None, (1, False)),
@@ -112,6 +123,7 @@ def test_the_default_memory_gives_way_to_the_options_given(given, env, mode, res
 
 
 @pytest.mark.parametrize("args", [[], ["--mode", "disagreement"], ["--mode", "kickstart", "--no-overlap"],
+                                  ["--mode", "disagreement-distill", "--bare"],
                                   ["--env", STATE_ID, "--mode", "jsrl", "--steps", "20000"]])
 def test_dopt_train_runs_exactly_what_runconfig_resolves(args, monkeypatch, tmp_path):
     """`dopt train --goal G ...` and `train(RunConfig(goal=G, ...))` are one configuration, field by field: the
@@ -128,11 +140,12 @@ def test_dopt_train_runs_exactly_what_runconfig_resolves(args, monkeypatch, tmp_
 
     monkeypatch.setattr(run_package, "train", capture)
     runner.invoke(app, ["train", "--goal", "bathtub", "--out", str(tmp_path), *args])
-    fields = dict(zip(args[::2], args[1::2]))
-    library = RunConfig(goal="bathtub", **{k.lstrip("-").replace("-", "_").replace("env", "env_id"): v
-                                           for k, v in fields.items() if not k.startswith("--no")},
-                        **({"overlap": False} if "--no-overlap" in args else {}))
-    library = RunConfig(**{**asdict(library), "steps": int(library.steps)})
+    switches = {"--no-overlap": ("overlap", False), "--bare": ("finish", False)}
+    given = dict(switches[a] for a in args if a in switches)
+    rest = [a for a in args if a not in switches]
+    for flag, value in zip(rest[::2], rest[1::2]):
+        given["env_id" if flag == "--env" else flag[2:].replace("-", "_")] = int(value) if value.isdigit() else value
+    library = RunConfig(goal="bathtub", **given)
     assert asdict(seen["config"]) == asdict(library)
     if not args:  # the default: kickstarting with the finish, on the RGB apartment
         assert (library.frame_stack, library.loop_flags, library.consistency_harvest, library.greedy_phase,
@@ -397,7 +410,7 @@ def test_the_ppo_modes_settings_are_the_published_hyperparameters_file():
 
 
 def test_a_run_whose_output_is_not_a_terminal_prints_plain_progress_lines(zoo, tmp_path):
-    result = runner.invoke(app, _train_args(zoo, tmp_path, "--progress-every", "0"))
+    result = runner.invoke(app, _train_args(zoo, tmp_path, "--progress-every", "0", "--bare"))  # priors act
     assert result.exit_code == 0, result.output
     lines = [line for line in result.output.splitlines() if line.startswith("steps ")]
     assert len(lines) >= 2 and lines[-1].startswith("steps 400/400 | ")

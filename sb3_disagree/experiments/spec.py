@@ -39,7 +39,7 @@ from typing import Any, Optional
 import yaml
 
 from sb3_disagree.files import safe_name
-from sb3_disagree.run import RunConfig, acer_defaults
+from sb3_disagree.run import RunConfig
 from sb3_disagree.run.presets import acer_signature_defaults, trained_with
 
 # Experiments shipped with the repository; a path to any YAML file works too.
@@ -199,9 +199,8 @@ class Experiment:
                                      f"got {same_as!r}")
                 cell_acer = overrides.pop("acer", {})
                 fields = {**self.run, **overrides}
-                # The cell's mode picks ACER's defaults, as dopt train's does; the grid's and the cell's go on top.
-                mode = fields.get("mode", RunConfig.__dataclass_fields__["mode"].default)
-                acer = {**acer_defaults(mode if isinstance(mode, str) else ""), **self.acer, **cell_acer}
+                # The grid's and the cell's ACER settings; RunConfig adds the mode's, as dopt train's does.
+                acer = {**self.acer, **cell_acer}
                 unknown = set(fields) - set(RunConfig.__dataclass_fields__)
                 if unknown:
                     raise ValueError(f"experiment {self.name!r}, cell {cell!r}: unknown run fields {sorted(unknown)}")

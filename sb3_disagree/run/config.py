@@ -28,8 +28,9 @@ class RunConfig:
 
     :param goal: The new goal word
     :param env_id: Gymnasium id of the environment (a goal-navigation env of this package)
-    :param mode: "kickstart" (the default: the new policy acts alone and is distilled toward the priors' mixture,
-        then finished), "disagreement" (the paper's disagreement options), "room-sensor" (the oracle gate), "jsrl"
+    :param mode: "kickstart" (the default: the new policy acts alone and is distilled toward the priors' mixture),
+        "disagreement" (the paper's disagreement options), "disagreement-distill" (the same, distilled toward the
+        priors' mixture as kickstarting is), "room-sensor" (the oracle gate), "jsrl"
         (the priors guide each episode's first steps), "finetune" (ACER from the nearest prior's weights),
         "scratch" (ACER alone) or "ppo" (SB3's PPO alone); README's table says what each measured
     :param priors: "auto" (the two nearest the goal in the embedding) or the goal labels of the priors
@@ -55,8 +56,12 @@ class RunConfig:
     :param loop_flags: The new policy's CNN sees the newest frame, and flags say whether it equals each older frame
         of its stack (pressed against a wall, turning back and forth; ``LoopFlagsCNN``); needs images
 
-    **The finish** (what makes the handed-over policy work greedily on its own)
+    **The finish** (what makes the handed-over policy work greedily on its own; its defaults:
+    ``hyperparams/modes.yml``'s ``finish``)
 
+    :param finish: Give an ACER mode the finish: memory as loop flags (on images), a moving average of the weights to
+        act with (``ema_decay``), the greedy phase and the validated fit to the harvest (False: the mode bare, as the
+        paper's figures ran; None: True, but False for ppo)
     :param consistency_harvest: ``model.zip`` is fitted to the loop-free paths of the training's own successful
         episodes over its last this many env steps (all of them if the budget is smaller; no env step more; 0: none)
     :param greedy_phase: The last this many env steps act by the new policy's argmax (``greedy_epsilon`` of its own
@@ -104,6 +109,7 @@ class RunConfig:
     embedding: Optional[str] = None
     frame_stack: Optional[int] = None
     loop_flags: Optional[bool] = None
+    finish: Optional[bool] = None
     consistency_harvest: Optional[int] = None
     greedy_phase: Optional[int] = None
     greedy_epsilon: float = 0.2
@@ -183,10 +189,12 @@ class RunConfig:
             raise ValueError(f"--consistency-validation must be >= 0, got {self.consistency_validation}")
         if self.consistency_validation and not self.consistency_harvest:
             raise ValueError("--consistency-validation validates the harvest's fit: give --consistency-harvest too")
+        if self.finish and self.mode == "ppo":
+            raise ValueError("--finish acts on ACER's networks; --mode ppo trains SB3's PPO without one")
         if self.consistency_harvest and self.mode == "ppo":
             raise ValueError("--consistency-harvest refines an ACER policy; --mode ppo trains SB3's PPO")
         if self.mode == "ppo":  # ACER's settings beyond the defaults (--reward-scale, --ema-decay) would be ignored
-            given = [k for k, v in self.acer_kwargs.items() if acer_defaults(self.mode).get(k) != v]
+            given = [k for k, v in self.acer_kwargs.items() if acer_defaults(self.mode, self.finish, self.overlap).get(k) != v]
             if given:
                 flags = ", ".join("--" + k.replace("_", "-") for k in given)
                 raise ValueError(f"{flags}: settings of ACER; --mode ppo trains SB3's PPO without them")

@@ -12,8 +12,8 @@ import yaml
 PRESETS = Path(__file__).resolve().parents[1] / "hyperparams" / "modes.yml"
 # The RunConfig fields a preset may set, and what the library ran with before a preset set them (a saved config
 # without one of them ran with this).
-RESOLVED = {"overlap": False, "frame_stack": 1, "loop_flags": False, "consistency_harvest": 0, "greedy_phase": 0,
-            "consistency_validation": 0}
+RESOLVED = {"overlap": False, "finish": False, "frame_stack": 1, "loop_flags": False, "consistency_harvest": 0,
+            "greedy_phase": 0, "consistency_validation": 0}
 
 
 @functools.lru_cache(maxsize=1)
@@ -22,16 +22,24 @@ def presets() -> dict[str, dict[str, Any]]:
     return yaml.safe_load(PRESETS.read_text())
 
 
-def preset(mode: str, key: str) -> dict[str, Any]:
-    """One part of a mode's preset (``run``, ``images``, ``acer``, ``overlapped``, ``ppo``): the mode's own on top of
-    ``all``'s."""
+def preset(mode: str, key: str, finish: bool = False) -> dict[str, Any]:
+    """One part of a mode's preset (``run``, ``images``, ``acer``, ``overlapped``, ``ppo``): ``all``'s, then the
+    finish's where ``finish``, then the mode's own."""
     data = presets()
-    return {**data["all"].get(key, {}), **data.get(mode, {}).get(key, {})}
+    return {**data["all"].get(key, {}), **(data["finish"].get(key, {}) if finish else {}),
+            **data.get(mode, {}).get(key, {})}
 
 
-def acer_defaults(mode: str) -> dict[str, Any]:
-    """ACER's settings for a mode when a run names none (without those that depend on the loop)."""
-    return preset(mode, "acer")
+def finished(mode: str) -> bool:
+    """Whether a mode's runs get the finish when a run does not say."""
+    return bool(preset(mode, "run")["finish"])
+
+
+def acer_defaults(mode: str, finish: Optional[bool] = None, overlap: bool = False) -> dict[str, Any]:
+    """ACER's settings for a mode when a run names none; ``finish`` None: as the mode's runs are by default;
+    ``overlap``: with those of the overlapped loop."""
+    finish = finished(mode) if finish is None else finish
+    return {**preset(mode, "acer", finish), **(preset(mode, "overlapped", finish) if overlap else {})}
 
 
 def resolve(fields: dict[str, Any], images: bool) -> dict[str, Any]:
@@ -39,16 +47,19 @@ def resolve(fields: dict[str, Any], images: bool) -> dict[str, Any]:
     A run's settings with what it was not given (None) taken from its mode's preset.
 
     :param fields: RunConfig's fields as given: ``mode``, ``steps``, ``acer_kwargs`` and the fields of ``RESOLVED``
-        (None where not given)
+        (None where not given; ``finish`` None: the mode's)
     :param images: Whether the env observes images (a preset's ``images`` part applies)
     :return: Those fields resolved
     """
     mode = fields["mode"]
-    run = {**preset(mode, "run"), **(preset(mode, "images") if images else {})}
+    finish = finished(mode) if fields.get("finish") is None else bool(fields["finish"])
+    run = {**preset(mode, "run", finish), **(preset(mode, "images", finish) if images else {})}
     out = dict(fields)
+    out["finish"] = finish
     given = {k for k in RESOLVED if fields.get(k) is not None}
     for key in RESOLVED:
-        if key not in given and key not in ("greedy_phase", "consistency_validation", "frame_stack", "loop_flags"):
+        if key not in given and key not in ("finish", "greedy_phase", "consistency_validation", "frame_stack",
+                                            "loop_flags"):
             out[key] = run[key]
     # Memory: loop flags need a stack, and a stack asked for alone is a plain one.
     flags, stack = fields.get("loop_flags"), fields.get("frame_stack")
@@ -60,12 +71,12 @@ def resolve(fields: dict[str, Any], images: bool) -> dict[str, Any]:
     # The greedy phase is the harvest's steps (capped at the budget); a fit is validated only where there is one.
     if "greedy_phase" not in given:
         phase = run["greedy_phase"]
-        out["greedy_phase"] = min(_int(out["consistency_harvest"]), _int(fields.get("steps"))) if phase == "harvest" else phase
+        harvest = max(0, min(_int(out["consistency_harvest"]), _int(fields.get("steps"))))
+        out["greedy_phase"] = harvest if phase == "harvest" else phase
     if "consistency_validation" not in given:
         out["consistency_validation"] = run["consistency_validation"] if out["consistency_harvest"] else 0
     acer = dict(fields.get("acer_kwargs") or {})
-    defaults = {**acer_defaults(mode), **(preset(mode, "overlapped") if out["overlap"] else {})}
-    out["acer_kwargs"] = {**defaults, **acer}
+    out["acer_kwargs"] = {**acer_defaults(mode, finish, out["overlap"]), **acer}
     return out
 
 
