@@ -456,3 +456,25 @@ def test_every_shipped_grid_resolves_to_the_settings_its_committed_runs_were_mad
                 assert _differing(json.loads(saved.read_text())["config"], run.config) == [], (grid.stem, run.cell)
                 checked += 1
     assert checked >= 180
+
+
+def test_a_list_of_goals_runs_every_cell_on_every_goal_with_its_own_priors(zoo, tmp_path):
+    spec = yaml.safe_load(_grid(tmp_path, zoo).read_text())
+    spec.update(name="goals", goal=["bathtub", "toilet"], priors="auto", trajectories=False)
+    path = tmp_path / "goals.yaml"
+    path.write_text(yaml.safe_dump(spec))
+    experiment = load_experiment(str(path))
+    runs = experiment.runs()
+    assert [r.cell for r in runs[:6]] == ["beta-big@bathtub", "disagreement@bathtub", "scratch@bathtub",
+                                          "beta-big@toilet", "disagreement@toilet", "scratch@toilet"]  # (sorted)
+    assert {(r.cell.split("@")[1], r.config.goal, r.config.priors) for r in runs} == {
+        ("bathtub", "bathtub", "auto"), ("toilet", "toilet", "auto")}
+    assert runs[0].config.beta == 100.0 and len(runs) == 12  # two seeds
+    experiment.restrict(seeds=[0], cells=["scratch", "beta-big@toilet"])  # a cell alone: on every goal
+    assert [r.cell for r in experiment.runs()] == ["scratch@bathtub", "beta-big@toilet", "scratch@toilet"]
+    with pytest.raises(ValueError, match="not among"):
+        load_experiment(str(path)).restrict(cells=["nothing"])
+    for bad in ({"priors": ["shower", "toilet"]}, {"goal": ["bathtub", "bathtub"]}, {"goal": ["bathtub", 3]}):
+        path.write_text(yaml.safe_dump({**spec, **bad}))
+        with pytest.raises(ValueError, match="list of goals|distinct words"):
+            load_experiment(str(path))

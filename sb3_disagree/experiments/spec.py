@@ -115,7 +115,8 @@ class Experiment:
     A named grid of runs.
 
     :param name: The experiment's name (its results folder)
-    :param goal: The new goal
+    :param goal: The new goal, or a list of goals: each cell then runs on each goal, as the cell ``CELL@GOAL``, with
+        the priors the embedding chooses for that goal (``priors: auto``)
     :param cells: Cell name -> overrides of RunConfig fields (and an ``acer`` mapping)
     :param seeds: Seeds of every cell
     :param steps: Env steps of every run
@@ -142,6 +143,24 @@ class Experiment:
     acer: dict[str, Any] = field(default_factory=dict)
     trajectories: bool = False
     continues: Optional[str] = None
+    goals: list[str] = field(default_factory=list, init=False)
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.goal, list):
+            return
+        # A goals table: every cell on every goal, each goal with the priors the embedding chooses for it.
+        if not self.goal or not all(isinstance(g, str) for g in self.goal) or len(set(self.goal)) < len(self.goal):
+            raise ValueError(f"experiment {self.name!r}: goal must be a word or a list of distinct words, "
+                             f"got {self.goal!r}")
+        if self.priors != "auto" or self.trajectories or self.continues:
+            raise ValueError(f"experiment {self.name!r}: a list of goals takes priors: auto (each goal's own), and "
+                             "neither trajectories nor continues")
+        if not isinstance(self.cells, dict) or not all(isinstance(v, (dict, type(None))) for v in self.cells.values()):
+            return  # runs() says what is wrong with them
+        self.goals = list(self.goal)
+        self.cells = {f"{cell}@{goal}": {**(overrides or {}), "goal": goal}
+                      for goal in self.goals for cell, overrides in self.cells.items()}
+        self.goal = ", ".join(self.goals)
 
     def restrict(self, seeds: Optional[list[int]] = None, cells: Optional[list[str]] = None) -> None:
         """Keep only some of the seeds and cells (each must be part of the experiment)."""
@@ -151,10 +170,12 @@ class Experiment:
                 raise ValueError(f"seeds {unknown} are not among {self.name}'s seeds {self.seeds}")
             self.seeds = [s for s in self.seeds if s in seeds]
         if cells is not None:
-            unknown = sorted(set(cells) - set(self.cells))
+            # In a goals table, a cell's name alone stands for it on every goal.
+            bases = {c.split("@")[0] for c in self.cells} if self.goals else set()
+            unknown = sorted(set(cells) - set(self.cells) - bases)
             if unknown:
                 raise ValueError(f"cells {unknown} are not among {self.name}'s cells {list(self.cells)}")
-            self.cells = {c: v for c, v in self.cells.items() if c in cells}
+            self.cells = {c: v for c, v in self.cells.items() if c in cells or (self.goals and c.split("@")[0] in cells)}
 
     def check(self) -> None:
         """The grid's own fields: of their types, counts and budgets positive."""
@@ -205,7 +226,8 @@ class Experiment:
                 if unknown:
                     raise ValueError(f"experiment {self.name!r}, cell {cell!r}: unknown run fields {sorted(unknown)}")
                 # The grid's own fields are set once, at the top of the file, for every cell and seed.
-                grid = dict(goal=self.goal, env_id=self.env_id, priors=self.priors, steps=self.steps, seed=seed,
+                goal = fields.pop("goal") if self.goals else self.goal
+                grid = dict(goal=goal, env_id=self.env_id, priors=self.priors, steps=self.steps, seed=seed,
                             acer_kwargs=acer)
                 grid_wide = sorted(set(fields) & set(grid))
                 if grid_wide:
