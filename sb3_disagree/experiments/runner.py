@@ -61,8 +61,10 @@ def train_and_evaluate(run: Run, folder: Path, source: Optional[Path] = None,
     import torch as th
 
     # One torch thread per run, as several share a machine; an overlapped run works in two threads, and its
-    # on-policy update (while the other thread is idle) may use both.
-    th.set_num_threads(2 if run.config.overlap else 1)
+    # on-policy update (while the other thread is idle) may use both. OMP_NUM_THREADS, where set, says otherwise
+    # (lanes of runs side by side: threads that outnumber the cores spin against each other).
+    threads = os.environ.get("OMP_NUM_THREADS", "")
+    th.set_num_threads(int(threads) if threads.isdigit() and int(threads) > 0 else 2 if run.config.overlap else 1)
     from sb3_disagree.run import train, write_card
 
     begun = _start_from(source, folder) if source is not None else 0
