@@ -171,16 +171,21 @@ class _RecordSteps(BaseCallback):
 
     def _on_step(self) -> bool:
         infos = self.locals["infos"]
+        net_input = self.locals["observations"][self.locals["step"]] if "observations" in self.locals else self.before
         self.steps.append((self.before, self.locals["actions"].copy(), self.locals["dones"].copy(),
-                           [bool(info.get("is_success")) for info in infos],
-                           self.locals["observations"][self.locals["step"]].copy()))
+                           [bool(info.get("is_success")) for info in infos], net_input.copy()))
         self.before = self.locals["new_obs"].copy()
         return True
 
 
-def test_harvest_keeps_the_loop_free_paths_of_training_episodes_after_its_start():
+@pytest.mark.parametrize("algorithm", ["acer", "ppo"])
+def test_harvest_keeps_the_loop_free_paths_of_training_episodes_after_its_start(algorithm):
+    """ACER's own training episodes, or SB3's PPO's (the finish's fit acts through the policy's distribution)."""
+    from stable_baselines3 import PPO
+
     env = make_vec_env(TurnEnv, n_envs=4, seed=3)
-    model = ACER("MlpPolicy", env, seed=0, n_steps=10, policy_kwargs=dict(net_arch=[32]))
+    model = (ACER("MlpPolicy", env, seed=0, n_steps=10, policy_kwargs=dict(net_arch=[32])) if algorithm == "acer" else
+             PPO("MlpPolicy", env, seed=0, n_steps=50, batch_size=50, policy_kwargs=dict(net_arch=[32])))
     record, harvest = _RecordSteps(), HarvestLabels(start=800)
     model.learn(2000, callback=[record, harvest])
     # The same labels computed here from the recorded steps: env by env, from step 200 (800 env steps / 4 envs) on,

@@ -3,7 +3,6 @@
 import json
 import shutil
 import tempfile
-from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -403,7 +402,8 @@ def test_shipped_grids_still_make_their_committed_runs():
             record, now = json.loads(saved_path.read_text())["config"], asdict(run.config)
             # a setting newer than the record ran at what the library had then (ACER's default, the mode's distillation)
             saved = trained_with(record, {})
-            assert saved["acer_kwargs"] == {**acer, **now["acer_kwargs"]}, (experiment.name, run.cell)
+            if now["mode"] != "ppo":  # SB3's PPO runs none of ACER's settings, whatever a record of it lists
+                assert saved["acer_kwargs"] == {**acer, **now["acer_kwargs"]}, (experiment.name, run.cell)
             assert saved["mode"] == now["mode"]
             # what a mode's preset resolves: the saved value, or what the library ran with before it was saved
             assert {k: saved[k] for k in RESOLVED} == {k: now[k] for k in RESOLVED}, (
@@ -439,23 +439,6 @@ def test_every_cell_of_a_figure_has_its_own_colour(n):
 def test_cell_colours_repeat_only_past_sixty():
     colors = cell_colors(61)
     assert len(set(colors)) == 60 and colors[60] == colors[0]
-
-
-def test_every_shipped_grid_resolves_to_the_settings_its_committed_runs_were_made_with():
-    """A preset that changes (a mode's default, the finish) must not change what a shipped grid would run: each
-    committed run's saved configuration equals its grid's, field by field."""
-    from sb3_disagree.experiments.spec import SHIPPED, _differing, load_experiment
-
-    results = Path(__file__).resolve().parents[1] / "benchmarks" / "results" / "experiments"
-    checked = 0
-    for grid in sorted(SHIPPED.glob("*.yaml")):
-        folder = results / grid.stem
-        for run in load_experiment(grid.stem).runs():
-            saved = run.folder(folder) / "result.json"
-            if saved.exists():
-                assert _differing(json.loads(saved.read_text())["config"], run.config) == [], (grid.stem, run.cell)
-                checked += 1
-    assert checked >= 180
 
 
 def test_a_list_of_goals_runs_every_cell_on_every_goal_with_its_own_priors(zoo, tmp_path):

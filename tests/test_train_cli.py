@@ -42,16 +42,16 @@ def test_train_writes_the_run_folder(zoo, tmp_path, mode, bare):
     assert list((run / "monitor").glob("*.monitor.csv")) and list(run.glob("events.out.tfevents*"))
     cfg = yaml.safe_load((run / "config.yaml").read_text())
     assert cfg["finished"] and cfg["num_timesteps"] >= 400
-    # Every ACER mode is finished unless bare: the harvest (all 400 steps here) acted greedily by the current
-    # weights, its fit validated, the moving average acted with; ppo has no finish.
-    finished = mode != "ppo" and not bare
+    # Every mode is finished unless bare: the harvest (all 400 steps here) acted greedily by the current weights,
+    # its fit validated, the moving average acted with; ppo gets the harvest's validated fit, sampled as it trains.
+    finished, acer = not bare, mode != "ppo"
     assert cfg["finish"] is finished
-    assert (cfg["consistency_harvest"], cfg["greedy_phase"]) == ((30_000, 400) if finished else (0, 0))
+    assert (cfg["consistency_harvest"], cfg["greedy_phase"]) == ((30_000, 400 if acer else 0) if finished else (0, 0))
     assert cfg["consistency_validation"] == (40 if finished else 0)
-    assert cfg["acer_kwargs"].get("ema_decay", 0.0) == (0.999 if finished else 0.0)
+    assert cfg["acer_kwargs"].get("ema_decay", 0.0) == (0.999 if finished and acer else 0.0)
     assert ("harvest" in (cfg.get("consistency") or {})) is finished
-    # the replays' reference computed ahead: the overlapped loop's default in every mode
-    assert cfg["acer_kwargs"].get("average_ahead", False) is True
+    # the replays' reference computed ahead: the overlapped loop's default in every ACER mode; ppo keeps no ACER setting
+    assert cfg["acer_kwargs"].get("average_ahead", False) is acer and (acer or cfg["acer_kwargs"] == {})
     assert (cfg["frame_stack"], cfg["loop_flags"]) == (1, False)  # state observations: no frames to compare
     distilled = mode in ("kickstart", "disagreement-distill")
     assert cfg["acer_kwargs"].get("distill_coef", 0.0) == (1.0 if distilled else 0.0)
@@ -95,7 +95,7 @@ def test_the_default_harvest_gives_way_to_the_options_given(zoo, tmp_path):
     ({}, "disagreement", None, (30_000, 30_000, 40)),  # every ACER mode is finished
     ({"finish": False}, "disagreement", None, (0, 0, 0)),  # bare: as the paper's figures ran
     ({"finish": False, "consistency_harvest": 200}, "scratch", None, (200, 0, 0)),  # a part of it asked for
-    ({}, "ppo", None, (0, 0, 0)),  # no finish for SB3's PPO
+    ({}, "ppo", None, (30_000, 0, 40)),  # SB3's PPO: the harvest's validated fit, no greedy phase
     ({}, "kickstart", "RUN", (0, 0, 0)),  # a resumed run keeps its saved settings
 ])
 def test_the_default_harvest_gives_way_to_the_options_given_each(given, mode, resume, expected):

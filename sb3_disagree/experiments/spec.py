@@ -56,6 +56,8 @@ def _differing(saved: dict[str, Any], config: RunConfig, ignore: tuple[str, ...]
     saved = trained_with(saved, defaults)  # what the record ran with where it does not name a setting
     wanted = asdict(config)
     wanted["acer_kwargs"] = {**acer_signature_defaults(), **wanted["acer_kwargs"]}
+    if config.mode == "ppo":  # SB3's PPO runs none of ACER's settings, whatever a record of it lists
+        ignore = (*ignore, "acer_kwargs")
     return [k for k in wanted if k not in (*ignore, *OUTPUT_ONLY) and saved.get(k) != wanted[k]]
 
 

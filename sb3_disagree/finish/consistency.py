@@ -257,6 +257,18 @@ def collect_escapes(model: Any, env: VecEnv, steps: int, rng: np.random.Generato
                            "successes": trails.successes, "expert_labels": trails.expert_labels}
 
 
+def acting_network(policy: Any) -> th.nn.Module:
+    """What the fit trains: an ACER policy's acting network (its moving average where one is kept), or any other SB3
+    policy whole (PPO's: the fit acts through its action distribution, as ``predict`` does)."""
+    return policy.acting_net if hasattr(policy, "acting_net") else policy
+
+
+def _logits(policy: Any, net: th.nn.Module, x: th.Tensor) -> th.Tensor:
+    if net is policy:
+        return policy.get_distribution(x).distribution.logits
+    return net.logits(policy.extract_features(x, net.features_extractor))
+
+
 def fit_labels(policy: Any, inputs: Union[np.ndarray, _Rounds], actions: np.ndarray, epochs: int,
                learning_rate: float, batch_size: int, rng: np.random.Generator,
                on_epoch: Optional[Callable[[int, float, float], None]] = None) -> tuple[float, float]:
@@ -267,7 +279,7 @@ def fit_labels(policy: Any, inputs: Union[np.ndarray, _Rounds], actions: np.ndar
     :param on_epoch: Called after each epoch with its number (from 1), mean loss and accuracy
     :return: The last epoch's mean loss and accuracy (argmax equal to the label)
     """
-    net = policy.acting_net
+    net = acting_network(policy)
     net.requires_grad_(True)
     optimizer = th.optim.Adam(net.parameters(), lr=learning_rate)
     loss_sum = correct = 0.0
@@ -277,7 +289,7 @@ def fit_labels(policy: Any, inputs: Union[np.ndarray, _Rounds], actions: np.ndar
             for batch in np.array_split(rng.permutation(len(inputs)), max(len(inputs) // batch_size, 1)):
                 x = th.as_tensor(inputs[batch], device=policy.device)
                 y = th.as_tensor(actions[batch], device=policy.device)
-                logits = net.logits(policy.extract_features(x, net.features_extractor))
+                logits = _logits(policy, net, x)
                 loss = th.nn.functional.cross_entropy(logits, y)
                 optimizer.zero_grad()
                 loss.backward()
@@ -287,7 +299,7 @@ def fit_labels(policy: Any, inputs: Union[np.ndarray, _Rounds], actions: np.ndar
             if on_epoch is not None:
                 on_epoch(epoch, loss_sum / max(len(inputs), 1), correct / max(len(inputs), 1))
     finally:
-        if net is not policy.net:  # the moving average is not trained by gradient elsewhere
+        if net is not getattr(policy, "net", net):  # the moving average is not trained by gradient elsewhere
             net.requires_grad_(False)
     return loss_sum / max(len(inputs), 1), correct / max(len(inputs), 1)
 
@@ -303,7 +315,7 @@ def fit_best_epoch(policy: Any, inputs: Union[np.ndarray, _Rounds], actions: np.
     :param validate: The acting network's greedy success and mean episode length on validation episodes
     :return: The kept epoch, its loss and accuracy, and every epoch's validation success
     """
-    net, best, scores = policy.acting_net, None, []
+    net, best, scores = acting_network(policy), None, []
 
     def on_epoch(epoch: int, loss: float, accuracy: float) -> None:
         nonlocal best
@@ -385,7 +397,8 @@ def greedy_consistency(model: Any, env: Optional[VecEnv], rounds: int = 3, steps
 
 class HarvestLabels(BaseCallback):
     """
-    Keep the loop-free paths of ACER's own successful training episodes from env step ``start`` on: labels for
+    Keep the loop-free paths of the training's own successful episodes (ACER's, or any SB3 on-policy algorithm's)
+    from env step ``start`` on: labels for
     :func:`greedy_consistency` from steps the training has spent anyway (an episode under way at ``start`` counts
     from there: the rest of a path to the goal is a path to the goal).
 
@@ -398,13 +411,15 @@ class HarvestLabels(BaseCallback):
         self.trails = _Trails(0)  # what was kept: labels, episodes, successes
 
     def _init_callback(self) -> None:
-        self.trails = _Trails(self.training_env.num_envs, self.model.policy.frame_stack)
+        self.trails = _Trails(self.training_env.num_envs, getattr(self.model.policy, "frame_stack", 1))
 
     def _on_step(self) -> bool:
         if self.num_timesteps <= self.start:  # num_timesteps counts this step already
             return True
-        # ACER's collect_rollouts: the net's input of this step, and the observation (its newest frame) before it
-        net_inputs, obs = self.locals["observations"][self.locals["step"]], self.model._last_obs
+        # The observation (its newest frame) before this step, and the net's input: ACER's collect_rollouts keeps the
+        # stack it acted on; SB3's on-policy loop (PPO) acts on the observation itself.
+        obs = self.model._last_obs
+        net_inputs = self.locals["observations"][self.locals["step"]] if "observations" in self.locals else obs
         for i, action in enumerate(self.locals["actions"]):
             self.trails.add(i, net_inputs[i], obs[i].tobytes(), int(action))
         for i in np.flatnonzero(self.locals["dones"]):

@@ -8,7 +8,8 @@ from typing import Any, Optional
 from sb3_disagree.defaults import DEFAULT_ENV
 from sb3_disagree.files import safe_name
 from sb3_disagree.options import MODES
-from sb3_disagree.run.presets import RESOLVED, acer_defaults, acer_parameters, preset, resolve, trained_with
+from sb3_disagree.run.presets import (RESOLVED, acer_defaults, acer_parameters, acer_signature_defaults, preset, resolve,
+                                      trained_with)
 
 # Each mode's settings live in hyperparams/modes.yml (run/presets.py); these names read them.
 KICKSTART: dict[str, Any] = {k: v for k, v in preset("kickstart", "acer").items() if k.startswith("distill")}
@@ -59,9 +60,9 @@ class RunConfig:
     **The finish** (what makes the handed-over policy work greedily on its own; its defaults:
     ``hyperparams/modes.yml``'s ``finish``)
 
-    :param finish: Give an ACER mode the finish: memory as loop flags (on images), a moving average of the weights to
-        act with (``ema_decay``), the greedy phase and the validated fit to the harvest (False: the mode bare, as the
-        paper's figures ran; None: True, but False for ppo)
+    :param finish: Give the mode the finish: memory as loop flags (on images), a moving average of the weights to
+        act with (``ema_decay``), the greedy phase and the validated fit to the harvest; ppo gets the harvest's
+        validated fit, which acts through ``predict`` (False: the mode bare, as the paper's figures ran; None: True)
     :param consistency_harvest: ``model.zip`` is fitted to the loop-free paths of the training's own successful
         episodes over its last this many env steps (all of them if the budget is smaller; no env step more; 0: none)
     :param greedy_phase: The last this many env steps act by the new policy's argmax (``greedy_epsilon`` of its own
@@ -189,12 +190,10 @@ class RunConfig:
             raise ValueError(f"--consistency-validation must be >= 0, got {self.consistency_validation}")
         if self.consistency_validation and not self.consistency_harvest:
             raise ValueError("--consistency-validation validates the harvest's fit: give --consistency-harvest too")
-        if self.finish and self.mode == "ppo":
-            raise ValueError("--finish acts on ACER's networks; --mode ppo trains SB3's PPO without one")
-        if self.consistency_harvest and self.mode == "ppo":
-            raise ValueError("--consistency-harvest refines an ACER policy; --mode ppo trains SB3's PPO")
         if self.mode == "ppo":  # ACER's settings beyond the defaults (--reward-scale, --ema-decay) would be ignored
-            given = [k for k, v in self.acer_kwargs.items() if acer_defaults(self.mode, self.finish, self.overlap).get(k) != v]
+            # (a ppo run saved before ppo kept none of them recorded the defaults of then: those pass)
+            defaults = {**acer_signature_defaults(), **acer_defaults("all", False, self.overlap)}
+            given = [k for k, v in self.acer_kwargs.items() if defaults.get(k) != v]
             if given:
                 flags = ", ".join("--" + k.replace("_", "-") for k in given)
                 raise ValueError(f"{flags}: settings of ACER; --mode ppo trains SB3's PPO without them")

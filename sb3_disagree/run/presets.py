@@ -76,7 +76,8 @@ def resolve(fields: dict[str, Any], images: bool) -> dict[str, Any]:
     if "consistency_validation" not in given:
         out["consistency_validation"] = run["consistency_validation"] if out["consistency_harvest"] else 0
     acer = dict(fields.get("acer_kwargs") or {})
-    out["acer_kwargs"] = {**acer_defaults(mode, finish, out["overlap"]), **acer}
+    # SB3's PPO takes none of ACER's settings: a ppo run keeps only those given (which validation refuses).
+    out["acer_kwargs"] = acer if mode == "ppo" else {**acer_defaults(mode, finish, out["overlap"]), **acer}
     return out
 
 
