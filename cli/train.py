@@ -65,7 +65,7 @@ HELPS = {
     "goal": "The new goal word (with --resume: the run's own).",
     "env_id": "Gymnasium id of a navigation env (default sb3_disagree/Apartment-v0).",
     "mode": "kickstart (default), disagreement, disagreement-distill, room-sensor, jsrl, finetune, scratch or ppo.",
-    "finish": "--bare: the mode without the finish, as the paper ran it (default: finished, ppo bare).",
+    "finish": "--bare: the mode without the finish, as the paper ran it (default: finished).",
     "priors": "auto (the two nearest the goal in the embedding), or their goals: a,b.",
     "steps": "Env steps to train (default 100000; with --resume, the new total).",
     "seed": "Seed of the policy and the envs (default 0).",

@@ -461,3 +461,13 @@ def test_a_list_of_goals_runs_every_cell_on_every_goal_with_its_own_priors(zoo, 
         path.write_text(yaml.safe_dump({**spec, **bad}))
         with pytest.raises(ValueError, match="list of goals|distinct words"):
             load_experiment(str(path))
+
+
+def test_a_run_never_takes_more_torch_threads_than_its_cores(monkeypatch):
+    from sb3_disagree.experiments.runner import torch_threads
+
+    monkeypatch.delenv("OMP_NUM_THREADS", raising=False)
+    assert [torch_threads(True, 2), torch_threads(True, 1), torch_threads(False, 2), torch_threads(True, 16)] == [
+        2, 1, 1, 2]  # two runs at a time on 2 cores: one thread each
+    monkeypatch.setenv("OMP_NUM_THREADS", "1")  # lanes started side by side say so
+    assert torch_threads(True, 2) == 1

@@ -49,22 +49,33 @@ def copy_run(run: Run, source: Path, folder: Path) -> dict[str, Any]:
     return result
 
 
+def torch_threads(overlap: bool, cores: int) -> int:
+    """
+    Torch's threads for one run given the cores it has to itself: one, or two for an overlapped run (its on-policy
+    update may use both while the other thread is idle), never more than its cores: threads that outnumber the cores
+    spin against each other (two overlapped runs side by side on 2 cores trained their first 12k env steps at 68 env
+    steps/s each with two threads each, at 204 with one). ``OMP_NUM_THREADS``, where set, says instead (runs started
+    side by side in separate processes).
+    """
+    given = os.environ.get("OMP_NUM_THREADS", "")
+    if given.isdigit() and int(given) > 0:
+        return int(given)
+    return max(1, min(2 if overlap else 1, cores))
+
+
 def train_and_evaluate(run: Run, folder: Path, source: Optional[Path] = None,
-                       progress_every: Optional[float] = None) -> dict[str, Any]:
+                       progress_every: Optional[float] = None, cores: int = 1) -> dict[str, Any]:
     """
     Train one run into ``folder``, evaluate the new policy alone, and write ``result.json``.
 
     :param source: A finished run to continue to ``run.config.steps`` instead of starting afresh
     :param progress_every: Print a progress line (prefixed with the cell and seed) every this many seconds
+    :param cores: The cores this run has to itself (:func:`torch_threads`)
     :return: The result record
     """
     import torch as th
 
-    # One torch thread per run, as several share a machine; an overlapped run works in two threads, and its
-    # on-policy update (while the other thread is idle) may use both. OMP_NUM_THREADS, where set, says otherwise
-    # (lanes of runs side by side: threads that outnumber the cores spin against each other).
-    threads = os.environ.get("OMP_NUM_THREADS", "")
-    th.set_num_threads(int(threads) if threads.isdigit() and int(threads) > 0 else 2 if run.config.overlap else 1)
+    th.set_num_threads(torch_threads(run.config.overlap, cores))
     from sb3_disagree.run import train, write_card
 
     begun = _start_from(source, folder) if source is not None else 0
@@ -167,10 +178,13 @@ def run_experiment(
             done(result)
     elif (jobs or os.cpu_count() or 1) == 1:
         for r, source in todo:
-            done(train_and_evaluate(r, r.folder(root), source, progress_every))
+            done(train_and_evaluate(r, r.folder(root), source, progress_every, os.cpu_count() or 1))
     else:
-        with ProcessPoolExecutor(jobs or os.cpu_count()) as pool:
-            futures = [pool.submit(train_and_evaluate, r, r.folder(root), source, progress_every) for r, source in todo]
+        jobs = jobs or os.cpu_count() or 1
+        cores = max(1, (os.cpu_count() or 1) // jobs)
+        with ProcessPoolExecutor(jobs) as pool:
+            futures = [pool.submit(train_and_evaluate, r, r.folder(root), source, progress_every, cores)
+                       for r, source in todo]
             for future in as_completed(futures):
                 done(future.result())
     return results
