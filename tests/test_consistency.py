@@ -270,7 +270,7 @@ def test_phase_refuses_bad_settings():
 def test_dopt_consistency_writes_beside_the_run_and_never_over_it(tmp_path):
     run = tmp_path / "run"
     result = runner.invoke(app, ["train", "--goal", "bathtub", "--env", "sb3_disagree/ApartmentState-v0", "--mode",
-                                 "scratch", "--steps", "200", "--n-envs", "2", "--out", str(tmp_path / "runs")])
+                                 "scratch", "--steps", "200", "--n-envs", "2", "--out", str(tmp_path / "runs"), "--bare"])
     assert result.exit_code == 0, result.output
     (run_dir,) = (tmp_path / "runs").glob("*/bathtub/scratch-0")
     before = (run_dir / "model.zip").read_bytes()
@@ -313,7 +313,7 @@ def test_dopt_train_refines_model_zip_when_asked_and_resume_keeps_it(tmp_path, m
 
     monkeypatch.setattr(sys.modules["sb3_disagree.run.train"], "greedy_consistency", shifting_phase)
     base = ["train", "--goal", "bathtub", "--env", "sb3_disagree/ApartmentState-v0", "--mode", "scratch", "--steps",
-            "200", "--n-envs", "2", "--card-episodes", "2", "--out", str(tmp_path)]
+            "200", "--n-envs", "2", "--card-episodes", "2", "--out", str(tmp_path), "--bare"]
     result = runner.invoke(app, [*base, "--consistency-harvest", "200"])
     assert result.exit_code == 0, result.output
     assert result.output.count("greedy consistency, the training's last episodes") == 1
@@ -343,7 +343,8 @@ def test_an_interrupted_fit_leaves_the_trained_model(tmp_path, monkeypatch):
 
     monkeypatch.setattr(module, "greedy_consistency", interrupted)
     args = ["train", "--goal", "bathtub", "--env", "sb3_disagree/ApartmentState-v0", "--mode", "scratch", "--steps",
-            "200", "--n-envs", "2", "--card-episodes", "0", "--out", str(tmp_path), "--consistency-harvest", "200"]
+            "200", "--n-envs", "2", "--card-episodes", "0", "--out", str(tmp_path), "--consistency-harvest", "200",
+            "--bare"]
     result = runner.invoke(app, args)
     (run_dir,) = tmp_path.glob("*/bathtub/scratch-0")
     assert result.exit_code == 130 and "interrupted in the greedy-consistency phase" in result.output
@@ -362,8 +363,7 @@ def _probs(model, obs):
 def test_dopt_train_fits_model_zip_to_the_harvest_of_its_own_episodes(tmp_path):
     base = ["train", "--goal", "bathtub", "--env", "sb3_disagree/ApartmentState-v0", "--mode", "scratch", "--steps",
             "600", "--n-envs", "2", "--card-episodes", "0", "--out", str(tmp_path), "--bare"]  # each part as asked
-    for bad in (["--consistency-harvest", "-1"],
-                ["--mode", "ppo", "--consistency-harvest", "100"], ["--consistency-validation", "5"],
+    for bad in (["--consistency-harvest", "-1"], ["--consistency-validation", "5"],
                 ["--consistency-harvest", "100", "--consistency-epochs", "0"]):
         result = runner.invoke(app, [*base, *bad])
         assert result.exit_code == 2 and "--consistency-" in result.output and not list(tmp_path.iterdir())
@@ -386,7 +386,7 @@ def test_dopt_train_says_so_when_its_harvest_has_nothing_to_fit(tmp_path):
     """No episode ends within 200 steps (the cut is 500): no labels, no fit, and no nan in what the user reads."""
     result = runner.invoke(app, ["train", "--goal", "bathtub", "--env", "sb3_disagree/ApartmentState-v0", "--mode",
                                  "scratch", "--steps", "200", "--n-envs", "2", "--card-episodes", "0", "--out",
-                                 str(tmp_path), "--consistency-harvest", "200"])
+                                 str(tmp_path), "--consistency-harvest", "200", "--bare"])
     assert result.exit_code == 0, result.output
     words = " ".join(result.output.split())
     assert "0/0 episodes reached the goal, 0 labels; nothing to fit, the policy stays as trained" in words
@@ -432,7 +432,7 @@ def test_dopt_train_fits_the_harvest_for_the_epochs_asked(tmp_path, monkeypatch)
     monkeypatch.setattr(run_train, "greedy_consistency", recorded)
     result = runner.invoke(app, ["train", "--goal", "bathtub", "--env", "sb3_disagree/ApartmentState-v0", "--mode",
                                  "scratch", "--steps", "400", "--n-envs", "2", "--card-episodes", "0", "--out",
-                                 str(tmp_path), "--consistency-harvest", "400", "--consistency-epochs", "2"])
+                                 str(tmp_path), "--consistency-harvest", "400", "--consistency-epochs", "2", "--bare"])
     assert result.exit_code == 0, result.output
     (run_dir,) = tmp_path.glob("*/bathtub/scratch-0")
     assert yaml.safe_load((run_dir / "config.yaml").read_text())["consistency_epochs"] == 2 and calls == [2]

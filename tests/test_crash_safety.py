@@ -27,7 +27,7 @@ runner = CliRunner()
 
 def _args(out, *extra, goal="bathtub"):
     return ["train", "--goal", goal, "--env", STATE_ID, "--mode", "disagreement", "--out", str(out), "--n-envs", "2",
-            "--card-episodes", "0", *extra]
+            "--card-episodes", "0", "--bare", *extra]
 
 
 def _tree(root: Path) -> dict[str, str]:

@@ -29,12 +29,14 @@ def zoo(tmp_path_factory):
 
 def _train_args(zoo, out, *extra):
     return ["train", "--goal", "bathtub", "--env", STATE_ID, "--zoo", str(zoo), "--out", str(out), "--steps", "400",
-            "--n-envs", "2", *(() if "--mode" in extra else ("--mode", "disagreement")), *extra]
+            "--n-envs", "2", *(() if "--mode" in extra else ("--mode", "disagreement", "--bare")), *extra]
 
 
 @pytest.mark.parametrize("mode,bare", [(m, False) for m in MODES] + [("disagreement", True), ("kickstart", True)])
 def test_train_writes_the_run_folder(zoo, tmp_path, mode, bare):
-    result = runner.invoke(app, _train_args(zoo, tmp_path, "--mode", mode, *(["--bare"] if bare else [])))
+    # (a short card and validation: the finish's defaults themselves are RunConfig's, tested below)
+    quick = ["--card-episodes", "2", *(["--bare"] if bare else ["--consistency-validation", "3"])]
+    result = runner.invoke(app, _train_args(zoo, tmp_path, "--mode", mode, *quick))
     assert result.exit_code == 0, result.output
     run = tmp_path / "sb3_disagree__ApartmentState-v0" / "bathtub" / f"{mode}-0"
     for name in ["model.zip", "config.yaml", "progress.csv"]:
@@ -47,7 +49,7 @@ def test_train_writes_the_run_folder(zoo, tmp_path, mode, bare):
     finished, acer = not bare, mode != "ppo"
     assert cfg["finish"] is finished
     assert (cfg["consistency_harvest"], cfg["greedy_phase"]) == ((30_000, 400 if acer else 0) if finished else (0, 0))
-    assert cfg["consistency_validation"] == (40 if finished else 0)
+    assert cfg["consistency_validation"] == (3 if finished else 0)
     assert cfg["acer_kwargs"].get("ema_decay", 0.0) == (0.999 if finished and acer else 0.0)
     assert ("harvest" in (cfg.get("consistency") or {})) is finished
     # the replays' reference computed ahead: the overlapped loop's default in every ACER mode; ppo keeps no ACER setting
@@ -410,7 +412,7 @@ def test_the_ppo_modes_settings_are_the_published_hyperparameters_file():
 
 
 def test_a_run_whose_output_is_not_a_terminal_prints_plain_progress_lines(zoo, tmp_path):
-    result = runner.invoke(app, _train_args(zoo, tmp_path, "--progress-every", "0", "--bare"))  # priors act
+    result = runner.invoke(app, _train_args(zoo, tmp_path, "--progress-every", "0"))  # bare: the priors act
     assert result.exit_code == 0, result.output
     lines = [line for line in result.output.splitlines() if line.startswith("steps ")]
     assert len(lines) >= 2 and lines[-1].startswith("steps 400/400 | ")
