@@ -24,10 +24,11 @@ def presets() -> dict[str, dict[str, Any]]:
 
 def preset(mode: str, key: str, finish: bool = False) -> dict[str, Any]:
     """One part of a mode's preset (``run``, ``images``, ``acer``, ``overlapped``, ``ppo``): ``all``'s, then the
-    finish's where ``finish``, then the mode's own."""
+    finish's where ``finish``, then the mode's own, then, where not ``finish``, ``bare``'s (the settings the bare
+    modes ran with)."""
     data = presets()
     return {**data["all"].get(key, {}), **(data["finish"].get(key, {}) if finish else {}),
-            **data.get(mode, {}).get(key, {})}
+            **data.get(mode, {}).get(key, {}), **(data["bare"].get(key, {}) if not finish else {})}
 
 
 def finished(mode: str) -> bool:
