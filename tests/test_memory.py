@@ -127,14 +127,18 @@ def test_a_linear_learning_rate_falls_to_zero_over_the_budget_and_survives_save_
     assert loaded.learning_rate == "lin_0.001" and loaded.lr_schedule(0.25) == pytest.approx(0.00025)
 
 
-@pytest.mark.parametrize("policy, env_class", [("MlpPolicy", CueEnv), ("CnnPolicy", ImageEnv)])
-def test_a_policy_started_from_a_prior_acts_as_the_prior_whatever_its_older_frames(policy, env_class):
+@pytest.mark.parametrize("policy, env_class, flags", [("MlpPolicy", CueEnv, False), ("CnnPolicy", ImageEnv, False),
+                                                      ("CnnPolicy", ImageEnv, True)])
+def test_a_policy_started_from_a_prior_acts_as_the_prior_whatever_its_older_frames(policy, env_class, flags):
+    """A plain prior into a policy with a stack, or with loop flags (fine-tuning with the finish's memory)."""
+    from sb3_disagree.acer.torch_layers import loop_flags_kwargs
     from sb3_disagree.acer.transfer import load_prior_weights, transfer_kwargs
 
     env = make_vec_env(env_class, n_envs=2, seed=0)
     prior = ACER(policy, env, n_steps=4, seed=1)
     prior.learn(64)  # weights away from their initialisation
-    model = ACER(policy, env, seed=2, policy_kwargs=dict(transfer_kwargs(prior.policy), frame_stack=3))
+    model = ACER(policy, env, seed=2, policy_kwargs=dict(transfer_kwargs(prior.policy), frame_stack=3,
+                                                         **(loop_flags_kwargs(3) if flags else {})))
     assert transfer_kwargs(model.policy)["frame_stack"] == 3  # a prior with memory passes it on to a fine-tuned policy
     copied = load_prior_weights(model.policy, prior.policy)
     assert copied and not any(name.startswith("q_net") for name in copied)
@@ -144,13 +148,17 @@ def test_a_policy_started_from_a_prior_acts_as_the_prior_whatever_its_older_fram
     if policy == "CnnPolicy":
         older = older.permute(0, 3, 1, 2)
     stacked = th.cat([older.to(obs.dtype), obs], dim=1)
+    if flags:  # pressed against a wall: the newest frame equals the older ones (both flags on)
+        stacked[0] = th.cat([obs[0]] * 3)
+        assert model.policy.net.features_extractor.flags(stacked)[0].tolist() == [1.0, 1.0]
     with th.no_grad():
         assert th.allclose(model.policy.action_probs(stacked), prior.policy.action_probs(obs), atol=1e-6)
         # The average network starts at the copied weights.
         prior_logits = prior.policy.net.logits(prior.policy.extract_features(obs, prior.policy.net.features_extractor))
         assert th.allclose(model.policy.average_logits(stacked), prior_logits, atol=1e-5)
         # The Q head is the new policy's own.
-        assert not th.allclose(model.policy.net.q_net.weight, prior.policy.net.q_net.weight)
+        theirs = prior.policy.net.q_net.weight
+        assert not th.allclose(model.policy.net.q_net.weight[:, :theirs.shape[1]], theirs)
 
 
 def test_a_prior_with_memory_gets_its_own_stack_as_its_predict_would_build_it():

@@ -63,7 +63,9 @@ def new_model(config: RunConfig, env, behaviour, priors: Optional[PriorSet]):
     if config.frame_stack > 1:
         policy_kwargs["frame_stack"] = config.frame_stack
     if config.loop_flags:  # validate() has checked the observations are images
-        policy_kwargs.update(loop_flags_kwargs(config.frame_stack))
+        # from a prior: its CNN's settings (its features), inside the loop flags' extractor
+        extractor = {k: v for k, v in policy_kwargs.get("features_extractor_kwargs", {}).items() if k != "frame_stack"}
+        policy_kwargs.update(loop_flags_kwargs(config.frame_stack, **(extractor if from_prior else {})))
     model = ACER(policy, env, seed=config.seed, behaviour=behaviour, overlap=config.overlap,
                  policy_kwargs=policy_kwargs, **acer_kwargs)
     if from_prior:
