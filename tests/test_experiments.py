@@ -380,7 +380,11 @@ def test_the_reports_acer_line_names_what_most_cells_have_and_what_each_sets_its
     assert acer_text([cell("a", reward_scale=0.1), cell("b", reward_scale=0.1)]) == "{n_steps: 20, reward_scale: 0.1}"
     text = acer_text([cell("a", reward_scale=0.1), cell("b", reward_scale=1.0, distill_coef=1.0),
                       cell("c", reward_scale=0.1)])
-    assert text == "{n_steps: 20, reward_scale: 0.1}; the cells' own: b {distill_coef: 1.0, reward_scale: 1.0}"
+    # a cell that does not name a setting another names ran at ACER's default (distill_coef 0)
+    assert text == ("{distill_coef: 0.0, n_steps: 20, reward_scale: 0.1}; the cells' own: b {distill_coef: 1.0, "
+                    "reward_scale: 1.0}")
+    text = acer_text([cell("a"), cell("b", distill_coef=1.0), cell("c", distill_coef=1.0)])
+    assert text == "{distill_coef: 1.0, n_steps: 20}; the cells' own: a {distill_coef: 0.0}"
 
 
 def test_shipped_grids_still_make_their_committed_runs():

@@ -75,7 +75,8 @@ def train_and_evaluate(run: Run, folder: Path, source: Optional[Path] = None,
     """
     import torch as th
 
-    th.set_num_threads(torch_threads(run.config.overlap, cores))
+    threads = torch_threads(run.config.overlap, cores)
+    th.set_num_threads(threads)
     from sb3_disagree.run import train, write_card
 
     begun = _start_from(source, folder) if source is not None else 0
@@ -97,7 +98,7 @@ def train_and_evaluate(run: Run, folder: Path, source: Optional[Path] = None,
     # The new policy alone from env seeds the run never trained on, greedy (SB3's default) and sampled, on its card.
     evaluations = write_card(folder, model, run.final_episodes, f"dopt experiment run {run.cell} (seed {run.seed})")
     result = {"cell": run.cell, "seed": run.seed, "steps": int(model.num_timesteps), "seconds": round(seconds, 1),
-              "fps": round((model.num_timesteps - begun) / max(seconds, 1e-9), 1),
+              "fps": round((model.num_timesteps - begun) / max(seconds, 1e-9), 1), "torch_threads": threads,
               "final_alone": evaluations["sampled"].as_dict(), "final_alone_greedy": evaluations["greedy"].as_dict(),
               "config": asdict(run.config), **({"continued_from": str(source), "from_steps": begun} if source else {})}
     write_atomic(folder / RESULT, json.dumps(result, indent=2) + "\n")

@@ -18,6 +18,7 @@ from sb3_disagree.experiments.curves import write_training_curves
 from sb3_disagree.experiments.report import (alone_markdown, plot, ratio_markdown, seeds_markdown, summarize,
                                              table_markdown)
 from sb3_disagree.experiments.spec import Experiment
+from sb3_disagree.run.presets import acer_signature_defaults
 
 
 def write_section(page: Path, name: str, title: str, body: str) -> None:
@@ -104,7 +105,11 @@ def acer_text(summaries: list) -> str:
     def flow(settings: dict) -> str:
         return yaml.safe_dump(settings, default_flow_style=True, width=200).strip()
 
-    per_cell = {c.cell: c.records[0]["config"]["acer_kwargs"] for c in summaries}
+    # a setting a cell's record does not name ran at ACER's default
+    defaults = acer_signature_defaults()
+    named = {k for c in summaries for k in c.records[0]["config"]["acer_kwargs"]}
+    per_cell = {c.cell: {**{k: defaults[k] for k in named if k in defaults}, **c.records[0]["config"]["acer_kwargs"]}
+                for c in summaries}
     common = {}
     for key in dict.fromkeys(k for a in per_cell.values() for k in a):
         (value, _), = Counter(repr(a.get(key, "<unset>")) for a in per_cell.values()).most_common(1)
@@ -155,8 +160,11 @@ def _body(experiment: Experiment, grid, summaries: list, figure_link: str, note:
     final_how = (" with SB3's `evaluate_policy` from env seeds the run never trained on, greedy and sampled"
                  if any(c.final_greedy_seeds for c in summaries) else "")
     how = "two runs at a time, one torch thread each"
+    threads = {r.get("torch_threads") for c in summaries for r in c.records}
     overlapped = [c.cell for c in summaries if c.records[0]["config"].get("overlap")]
-    if overlapped:
+    if None not in threads:  # recorded by each run
+        how = f"torch threads per run: {', '.join(map(str, sorted(threads)))}"
+    elif overlapped:
         how += (f" (the overlapped cells, {', '.join(overlapped)}: one run at a time, two torch threads for the on-policy "
                 "update and one in each of its two threads while the replay updates overlap the rollouts)")
     machine = f"{platform.machine()}, {os.cpu_count()} cores, {how}"
