@@ -352,7 +352,7 @@ def test_a_cells_mode_picks_acers_defaults_and_the_grid_and_cell_go_on_top(tmp_p
     path.write_text(yaml.safe_dump(spec))
     acer = {r.cell: r.config.acer_kwargs for r in load_experiment(path).runs()}
     assert acer["kick"]["reward_scale"] == 1.0 and acer["default"]["reward_scale"] == 1.0  # as RunConfig's
-    assert acer["kick-01"]["reward_scale"] == 0.1 and acer["options"]["reward_scale"] == 0.1
+    assert acer["kick-01"]["reward_scale"] == 0.1 and acer["options"]["reward_scale"] == 1.0  # disagreement's preset
     assert all(a["ent_coef"] == 0.02 and a["n_steps"] == ACER_KWARGS["n_steps"] for a in acer.values())
     assert acer["default"] == RunConfig(goal="bathtub", acer_kwargs={"ent_coef": 0.02}).acer_kwargs
 
