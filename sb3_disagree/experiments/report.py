@@ -218,6 +218,105 @@ def ratio_markdown(grid: np.ndarray, summaries: list[CellSummary], cell: str = "
     return "\n".join(lines)
 
 
+def chosen_priors(folder: Path) -> list[str]:
+    """The priors a run used, as its ``config.yaml`` records them (empty where it records none)."""
+    import yaml
+
+    path = folder / "config.yaml"
+    return list(yaml.safe_load(path.read_text()).get("chosen_priors") or []) if path.exists() else []
+
+
+@dataclass
+class GoalRow:
+    """One goal of a goals table: its priors, and per base cell its summary (None where no seed finished)."""
+
+    goal: str
+    priors: list[str]
+    cells: dict[str, Optional[CellSummary]]
+
+
+def goal_rows(experiment: Experiment, summaries: list[CellSummary], root: Path) -> tuple[list[str], list[GoalRow]]:
+    """A goals table's base cells (``CELL`` of ``CELL@GOAL``, in the grid's order) and one row per goal."""
+    by_name = {s.cell: s for s in summaries}
+    bases = list(dict.fromkeys(c.split("@")[0] for c in experiment.cells))
+    rows = []
+    for goal in experiment.goals:
+        cells = {b: by_name.get(f"{b}@{goal}") for b in bases}
+        done = [s for s in cells.values() if s is not None]
+        priors = chosen_priors(root / done[0].cell / f"seed-{done[0].seeds[0]}") if done else []
+        rows.append(GoalRow(goal, priors, cells))
+    return bases, rows
+
+
+def goals_markdown(experiment: Experiment, summaries: list[CellSummary], root: Path) -> str:
+    """
+    A goals table: per goal, its priors and per base cell the policy alone greedy and sampled (mean over seeds,
+    each seed in brackets) and the step where the mean training curve first reaches 90%; then, per base cell, the
+    mean over the goals measured and the lowest goal.
+    """
+    bases, rows = goal_rows(experiment, summaries, root)
+    head = "| goal | priors |" + "".join(f" {b}: greedy | {b}: sampled | {b}: 90% training success |" for b in bases)
+    lines = [head, "|---" * (2 + 3 * len(bases)) + "|"]
+    for row in rows:
+        line = f"| {row.goal} | {', '.join(row.priors) or '-'} |"
+        for b in bases:
+            s = row.cells[b]
+            line += (" not run | not run | not run |" if s is None else
+                     f" {_per_seed(s.final_greedy_seeds)} | {_per_seed(s.final_alone_seeds)} | {_steps(s.steps_to_90)} |")
+        lines.append(line)
+    for label, pick in (("mean over the goals run", np.mean), ("lowest goal", np.min)):
+        line = f"| **{label}** | |"
+        for b in bases:
+            done = [r.cells[b] for r in rows if r.cells[b] is not None and r.cells[b].final_greedy_seeds]
+            if not done:
+                line += " - | - | |"
+                continue
+            greedy = [float(np.mean(s.final_greedy_seeds)) for s in done]
+            sampled = [float(np.mean(s.final_alone_seeds)) for s in done]
+            which = ""
+            if pick is np.min:
+                which = f" ({done[int(np.argmin(greedy))].cell.split('@')[1]}; sampled: "
+                which += f"{done[int(np.argmin(sampled))].cell.split('@')[1]})"
+            line += f" **{pick(greedy):.2f}**{which if pick is np.min else ''} | **{pick(sampled):.2f}** | |"
+        lines.append(line)
+    return "\n".join(lines)
+
+
+def plot_goals(experiment: Experiment, summaries: list[CellSummary], out: Path, root: Path) -> None:
+    """The policy alone per goal: a bar per base cell (greedy, mean over seeds), a tick where sampled reached, and
+    each seed's greedy value as a dot."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    bases, rows = goal_rows(experiment, summaries, root)
+    colors = cell_colors(len(bases))
+    width = 0.8 / len(bases)
+    fig, ax = plt.subplots(figsize=(max(6.0, 1.1 * len(rows)), 4.2))
+    for j, b in enumerate(bases):
+        label = f"{b}: greedy (bar, seeds as dots), sampled (black tick)"
+        for i, row in enumerate(rows):
+            s = row.cells[b]
+            if s is None or not s.final_greedy_seeds:
+                continue
+            x = i - 0.4 + width * (j + 0.5)
+            ax.bar(x, np.mean(s.final_greedy_seeds), width * 0.9, color=colors[j], label=label)
+            label = None
+            ax.plot([x] * len(s.final_greedy_seeds), s.final_greedy_seeds, "o", color="black", markersize=3)
+            ax.plot([x - width * 0.45, x + width * 0.45], [np.mean(s.final_alone_seeds)] * 2, color="black", linewidth=2)
+    ax.set_xticks(range(len(rows)), [f"{r.goal}\n({', '.join(r.priors)})" if r.priors else r.goal for r in rows],
+                  fontsize=7)
+    ax.set(ylabel="success of the policy alone (100 episodes)", ylim=(0, 1.05),
+           title=f"{experiment.name}: the policy alone per goal, {experiment.steps // 1000}k env steps")
+    ax.axhline(0.85, color="grey", linestyle=":", linewidth=1)
+    ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.16), ncol=2, fontsize=7, frameon=False)
+    fig.tight_layout()
+    out.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(out, dpi=100, bbox_inches="tight")  # the legend sits under the goals' names
+    plt.close(fig)
+
+
 def plot(experiment: Experiment, grid: np.ndarray, summaries: list[CellSummary], out: Path, root: Path) -> None:
     """Training success (mean and 95% band) and prior usage against env steps; recorded paths if asked."""
     import matplotlib

@@ -15,8 +15,8 @@ from typing import Optional
 import yaml
 
 from sb3_disagree.experiments.curves import write_training_curves
-from sb3_disagree.experiments.report import (alone_markdown, plot, ratio_markdown, seeds_markdown, summarize,
-                                             table_markdown)
+from sb3_disagree.experiments.report import (alone_markdown, goals_markdown, plot, plot_goals, ratio_markdown,
+                                             seeds_markdown, summarize, table_markdown)
 from sb3_disagree.experiments.spec import Experiment
 from sb3_disagree.run.presets import acer_signature_defaults
 
@@ -71,16 +71,19 @@ def write_report(experiment: Experiment, root: Path, figure: Optional[Path] = No
                                 f"{experiment.name} --out {root}")
     write_training_curves(root, grid, {(s.cell, seed): c for s in summaries for seed, c in zip(s.seeds, s.seed_curves)})
     markdown, png = report_files(root, experiment, name)
-    plot(experiment, grid, summaries, png, root)
+    if experiment.goals:  # a goals table: the policy alone per goal (twenty curves would hide each other)
+        plot_goals(experiment, summaries, png, root)
+    else:
+        plot(experiment, grid, summaries, png, root)
     if figure is not None:
         figure.parent.mkdir(parents=True, exist_ok=True)
         figure.write_bytes(png.read_bytes())
     command = _command(experiment, root, figure, section, seeds, cells, name, summaries)
-    markdown.write_text(f"# {name}\n\n" + _body(experiment, grid, summaries, png.name, note, command) + "\n")
+    markdown.write_text(f"# {name}\n\n" + _body(experiment, grid, summaries, png.name, note, command, root) + "\n")
     if section is None:
         return markdown.read_text()
     link = os.path.relpath(figure or png, Path(section).parent)
-    body = _body(experiment, grid, summaries, link, note, command)
+    body = _body(experiment, grid, summaries, link, note, command, root)
     write_section(section, name, f"{name}: {experiment.goal}", body)
     return body
 
@@ -96,6 +99,17 @@ def _command(experiment: Experiment, root: Path, figure: Optional[Path], section
     # How many runs went at a time is the machine's business (said beside it), not the command's.
     return (f"`dopt experiment run {experiment.name} --seeds {','.join(map(str, ran))}{only} --out {root}` then "
             f"`{report}`")
+
+
+def _goals(experiment: Experiment, summaries: list, root: Path) -> str:
+    """A goals table's own table and how to read it (nothing for a grid on one goal)."""
+    if not experiment.goals:
+        return ""
+    return (f"{goals_markdown(experiment, summaries, root)}\n\nPer goal: the priors the embedding chose for it "
+            f"(its own entry excluded); the policy alone over {experiment.final_episodes} episodes each way (SB3's "
+            "`evaluate_policy`, env seeds the run never trained on), mean over seeds and each seed in brackets; the step "
+            "where the mean training curve first reaches 90%. Figure: greedy as bars, each seed a dot, sampled a black "
+            "tick; the dotted line is 0.85. Per cell and goal:\n\n")
 
 
 def acer_text(summaries: list) -> str:
@@ -134,7 +148,8 @@ def header_list(command: str, grid: str, seeds: str, steps: int, machine: str, n
     return "\n".join(lines)
 
 
-def _body(experiment: Experiment, grid, summaries: list, figure_link: str, note: str, command: str) -> str:
+def _body(experiment: Experiment, grid, summaries: list, figure_link: str, note: str, command: str,
+          root: Path) -> str:
     name = experiment.name
     continued = ""
     if experiment.continues:
@@ -170,10 +185,13 @@ def _body(experiment: Experiment, grid, summaries: list, figure_link: str, note:
     machine = f"{platform.machine()}, {os.cpu_count()} cores, {how}"
     body = (header_list(command, f"sb3_disagree/data/experiments/{name}.yaml", seeds_text, experiment.steps, machine,
                         note, acer_text(summaries), continued) + "\n\n"
-            f"![{Path(figure_link).stem}]({figure_link})\n\n{table_markdown(experiment, summaries)}\n\n"
-            "Solid lines: training success (the last 50 episodes over all envs, priors included where they were "
-            "followed), mean over seeds with a 95% t-interval (none with fewer than 3 seeds); dashed: the new policy "
-            f"alone (no priors, sampled actions, {alone_every}){greedy_curve}. Table: steps to 50%/90% and success at "
+            f"![{Path(figure_link).stem}]({figure_link})\n\n{_goals(experiment, summaries, root)}"
+            f"{table_markdown(experiment, summaries)}\n\n"
+            + ("" if experiment.goals else
+               "Solid lines: training success (the last 50 episodes over all envs, priors included where they were "
+               "followed), mean over seeds with a 95% t-interval (none with fewer than 3 seeds); dashed: the new policy "
+               f"alone (no priors, sampled actions, {alone_every}){greedy_curve}. ") +
+            "Table: steps to 50%/90% and success at "
             "the budgets read from the mean training curve; AUC is the mean of that curve over the run; the new policy "
             f"alone (final) is evaluated over {experiment.final_episodes} episodes after training{final_how}, per seed "
             "in brackets.\n\n"
