@@ -131,7 +131,13 @@ def acer_text(summaries: list) -> str:
         if key in holder:
             common[key] = holder[key]
     differs = {cell: {k: v for k, v in a.items() if k not in common or common[k] != v} for cell, a in per_cell.items()}
-    own = [f"{cell} {flow(d)}" for cell, d in differs.items() if d]
+    # A goals table's cell on every goal (CELL@GOAL) is named once where its settings are the same on each.
+    bases: dict[str, list[dict]] = {}
+    for cell, d in differs.items():
+        bases.setdefault(cell.split("@")[0], []).append(d)
+    named = {base: ds[0] for base, ds in bases.items() if all(d == ds[0] for d in ds)}
+    own = [f"{base} {flow(d)}" for base, d in named.items() if d]
+    own += [f"{cell} {flow(d)}" for cell, d in differs.items() if d and cell.split("@")[0] not in named]
     return flow(common) + (f"; the cells' own: {'; '.join(own)}" if own else "")
 
 
