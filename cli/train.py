@@ -40,7 +40,8 @@ class LiveDisplay(BaseCallback):
         stats = getattr(behaviour, "last", {}) if behaviour is not None else {}
         success = m.ep_success_buffer
         t = Table(show_header=False, box=None)
-        t.add_row("steps", f"{m.num_timesteps:,} / {self.total:,}")
+        # the budget as it stands (a run whose greedy phase waits for it to be ready ends when the phase does)
+        t.add_row("steps", f"{m.num_timesteps:,} / {getattr(m, '_total_timesteps', self.total):,}")
         t.add_row("env steps/s", f"{(m.num_timesteps - self.n0) / max(now - self.t0, 1e-9):.0f}")
         t.add_row("success (last 100 episodes)", f"{sum(success) / len(success):.2f}" if success else "-")
         t.add_row("prior usage", f"{stats['prior/usage']:.2f}" if "prior/usage" in stats else "-")
@@ -54,8 +55,8 @@ PANELS = {
     "Run": ("goal", "env_id", "mode", "priors", "steps", "seed", "n_envs", "out", "resume", "force", "trust"),
     "Method": ("alpha", "beta", "entropy_offset", "jsrl_horizon", "init", "zoo", "embedding"),
     "Memory": ("frame_stack", "loop_flags"),
-    "Finish": ("finish", "consistency_harvest", "greedy_phase", "greedy_epsilon", "consistency_epochs",
-               "consistency_validation"),
+    "Finish": ("finish", "consistency_harvest", "greedy_phase", "greedy_epsilon", "ready", "extend",
+               "consistency_epochs", "consistency_validation"),
     "ACER": ("reward_scale", "ema_decay", "average_ahead", "features_dtype", "overlap", "vec_env"),
     "Environment": ("collision_penalty", "reward_distance"),
     "Evaluation and logging": ("eval_every", "eval_episodes", "card_episodes", "checkpoint_every",
@@ -82,6 +83,8 @@ HELPS = {
     "consistency_harvest": "Fit model.zip to the loop-free successful paths of the last this many steps.",
     "greedy_phase": "The last this many steps act by the argmax (default: the harvest's).",
     "greedy_epsilon": "The policy's own samples in the greedy phase (default 0.2).",
+    "ready": "The greedy phase waits for this training success, the run training on (default: the mode's).",
+    "extend": "The most the budget grows while the phase waits, times --steps (default: the mode's).",
     "consistency_epochs": "Passes over the harvest's labels (default 3).",
     "consistency_validation": "Greedy episodes that pick the fit's best epoch (default: the mode's).",
     "reward_scale": "Rewards in ACER's targets times this (default: the mode's).",

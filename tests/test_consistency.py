@@ -2,6 +2,7 @@
 
 import json
 import sys
+from collections import deque
 
 import numpy as np
 import pytest
@@ -436,3 +437,57 @@ def test_dopt_train_fits_the_harvest_for_the_epochs_asked(tmp_path, monkeypatch)
     assert result.exit_code == 0, result.output
     (run_dir,) = tmp_path.glob("*/bathtub/scratch-0")
     assert yaml.safe_load((run_dir / "config.yaml").read_text())["consistency_epochs"] == 2 and calls == [2]
+
+
+class _Model:
+    """What StartWhenReady reads of a model: the success buffer and the budget it may end sooner."""
+
+    def __init__(self) -> None:
+        self.ep_success_buffer, self.num_timesteps, self._total_timesteps = deque(maxlen=100), 0, 1000
+
+    def end_at(self, timesteps: int) -> None:
+        self._total_timesteps = min(self._total_timesteps, timesteps)
+
+
+@pytest.mark.parametrize("successes, started", [
+    ({}, 400),                    # ready on time: the planned start, the planned end
+    ({400: 0.5, 560: 0.95}, 560),  # not yet at 400: training goes on until 560
+    ({400: 0.0}, 704),            # never ready: at the first step at or past the latest start (700)
+])
+def test_the_greedy_phase_waits_until_the_run_is_ready(successes, started):
+    from sb3_disagree.finish.greedy_phase import GreedyPhase
+    from sb3_disagree.finish.ready import NEVER, StartWhenReady
+
+    phase, harvest, model = GreedyPhase(object(), start=400), HarvestLabels(start=350), _Model()
+    model.ep_success_buffer.extend([1.0] * 99)  # 99 episodes: not yet judged
+    ready = StartWhenReady(phase, harvest, planned=400, latest=700, length=100, harvest_length=150, ready=0.9)
+    ready.init_callback(model)
+    starts = []
+    for t in range(8, 1000, 8):
+        model.num_timesteps = t
+        if t in successes:
+            model.ep_success_buffer.extend([1.0] * int(100 * successes[t]) + [0.0] * (100 - int(100 * successes[t])))
+        if t == 392 and not successes:
+            model.ep_success_buffer.append(1.0)  # the hundredth
+        assert ready.on_step()
+        starts.append(phase.start)
+        if t == 400 and started > 400:
+            assert phase.start == NEVER and harvest.start == NEVER  # neither acts while the run is not ready
+    assert ready.started == started and phase.start == started and harvest.start == started + 100 - 150
+    assert model._total_timesteps == started + 100  # the phase's 100 steps, then the end
+    assert set(starts) <= {400, NEVER, started}
+
+
+def test_dopt_train_extends_a_run_whose_greedy_phase_waits_for_it(tmp_path):
+    base = ["train", "--goal", "bathtub", "--env", "sb3_disagree/ApartmentState-v0", "--mode", "scratch", "--steps",
+            "480", "--n-envs", "2", "--card-episodes", "0", "--out", str(tmp_path), "--greedy-phase", "160",
+            "--consistency-harvest", "160", "--consistency-validation", "0", "--ready", "1", "--extend", "1.5"]
+    result = runner.invoke(app, base)
+    assert result.exit_code == 0, result.output
+    (run_dir,) = tmp_path.glob("*/bathtub/scratch-0")
+    saved = yaml.safe_load((run_dir / "config.yaml").read_text())
+    # never ready (not 100 episodes at this budget): the phase at 1.5 * 480 - 160, for 160 steps
+    assert saved["greedy_start"] == 560 and saved["num_timesteps"] == 720 and saved["steps"] == 480
+    for bad in (["--ready", "1.5"], ["--extend", "0.5"], ["--greedy-phase", "0", "--ready", "0.9"]):
+        result = runner.invoke(app, [*base, "--force", *bad])
+        assert result.exit_code == 2 and ("--ready" in result.output or "--extend" in result.output), result.output

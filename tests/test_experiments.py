@@ -471,27 +471,30 @@ def test_a_goals_table_reads_each_goals_priors_and_its_mean_and_lowest_goal(tmp_
     spec = {"name": "g", "goal": ["bathtub", "toilet", "bed"], "cells": {"a": {}, "b": {}}, "steps": 1000}
     experiment = Experiment(**spec)
 
-    def cell(name, greedy, sampled, to_90):
+    def cell(name, greedy, sampled, to_90, steps=(100_000, 100_000)):
         nan = np.full(50, np.nan)
         return CellSummary(cell=name, seeds=[0, 1], mean=nan, low=nan, high=nan, usage=nan, steps_to_50=None,
                            steps_to_90=to_90, at_budgets={}, auc=0.0, final_alone=float(np.mean(sampled)),
-                           final_alone_seeds=sampled, fps=0.0, final_greedy_seeds=greedy)
+                           final_alone_seeds=sampled, fps=0.0, final_greedy_seeds=greedy,
+                           records=[{"steps": s} for s in steps])
 
     for goal, priors in (("bathtub", ["shower", "toilet"]), ("toilet", ["bathtub", "shower"])):
         (tmp_path / f"a@{goal}" / "seed-0").mkdir(parents=True)
         (tmp_path / f"a@{goal}" / "seed-0" / "config.yaml").write_text(yaml.safe_dump({"chosen_priors": priors}))
     summaries = [cell("a@bathtub", [0.9, 0.8], [1.0, 1.0], 40_000), cell("b@bathtub", [0.5, 0.7], [0.9, 1.0], None),
-                 cell("a@toilet", [0.6, 0.4], [0.98, 0.96], 62_000)]  # bed not run; b not run on the toilet
+                 cell("a@toilet", [0.6, 0.4], [0.98, 0.96], 62_000, (100_000, 150_640))]  # bed not run; b not run on the toilet
     rows = goals_markdown(experiment, summaries, tmp_path).splitlines()
-    assert rows[0].startswith("| goal | priors | a: greedy | a: sampled | a: 90% training success | b: greedy |")
-    assert rows[2] == ("| bathtub | shower, toilet | 0.85 (0.90, 0.80) | 1.00 (1.00, 1.00) | 40k | 0.60 (0.50, 0.70) | "
-                       "0.95 (0.90, 1.00) | not reached |")
-    assert rows[3] == "| toilet | bathtub, shower | 0.50 (0.60, 0.40) | 0.97 (0.98, 0.96) | 62k | not run | not run | not run |"
-    assert rows[4] == "| bed | - | not run | not run | not run | not run | not run | not run |"
+    assert rows[0].startswith("| goal | priors | a: greedy | a: sampled | a: 90% training success | a: env steps | "
+                              "b: greedy |")
+    assert rows[2] == ("| bathtub | shower, toilet | 0.85 (0.90, 0.80) | 1.00 (1.00, 1.00) | 40k | 100k | 0.60 (0.50, 0.70) | "
+                       "0.95 (0.90, 1.00) | not reached | 100k |")
+    assert rows[3] == ("| toilet | bathtub, shower | 0.50 (0.60, 0.40) | 0.97 (0.98, 0.96) | 62k | 100k, 151k | not run | "
+                       "not run | not run | |")
+    assert rows[4] == "| bed | - | not run | not run | not run | | not run | not run | not run | |"
     # a: greedy means 0.85 and 0.50, sampled 1.00 and 0.97; b: bathtub alone
-    assert rows[5] == "| **mean over the goals run** | | **0.68** | **0.98** | | **0.60** | **0.95** | |"
-    assert rows[6] == ("| **lowest goal** | | **0.50** (toilet; sampled: toilet) | **0.97** | | **0.60** (bathtub; sampled: "
-                       "bathtub) | **0.95** | |")
+    assert rows[5] == "| **mean over the goals run** | | **0.68** | **0.98** | | | **0.60** | **0.95** | | |"
+    assert rows[6] == ("| **lowest goal** | | **0.50** (toilet; sampled: toilet) | **0.97** | | | **0.60** (bathtub; "
+                       "sampled: bathtub) | **0.95** | | |")
     plot_goals(experiment, summaries, tmp_path / "goals.png", tmp_path)
     assert (tmp_path / "goals.png").stat().st_size > 0
 

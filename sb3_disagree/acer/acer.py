@@ -573,12 +573,13 @@ class ACER(BaseAlgorithm):
         assert self.env is not None
 
         with self._segment_trainer() as train_on:
-            while self.num_timesteps < total_timesteps:
+            # The budget is read at each segment: a callback may end the run sooner (end_at), after its update.
+            while self.num_timesteps < self._total_timesteps:
                 segment = self.collect_rollouts(self.env, callback)
                 if segment is None:
                     break
                 iteration += 1
-                self._update_current_progress_remaining(self.num_timesteps, total_timesteps)
+                self._update_current_progress_remaining(self.num_timesteps, self._total_timesteps)
                 self.behaviour_policy.record(self.logger)
                 self._record_tags()
                 train_on(segment)
@@ -587,6 +588,15 @@ class ACER(BaseAlgorithm):
 
         callback.on_training_end()
         return self
+
+    def end_at(self, timesteps: int) -> None:
+        """
+        End the current ``learn`` once ``num_timesteps`` reaches ``timesteps`` (at the end of that segment, after its
+        update), where that is sooner than its budget; for a callback that decides the budget while learning.
+
+        :param timesteps: The env step count (``num_timesteps``) to stop at
+        """
+        self._total_timesteps = min(self._total_timesteps, int(timesteps))
 
     def _segment_trainer(self) -> contextlib.AbstractContextManager[Callable[[Segment], None]]:
         """What learns from each collected segment: :meth:`train`, or with ``overlap`` the overlapped trainer

@@ -87,9 +87,12 @@ def alone_curve(folders: list[Path], key: str = "successes") -> tuple[np.ndarray
 
 def summarize(experiment: Experiment, root: Path) -> tuple[np.ndarray, list[CellSummary]]:
     """Read every finished run of the experiment under ``root`` and summarise each cell."""
-    grid = np.linspace(experiment.steps / GRID_POINTS, experiment.steps, GRID_POINTS)
+    runs = experiment.runs()
+    # A run whose greedy phase waits until it is ready may train past its budget, up to `extend` times it.
+    end = max(int(r.config.steps * r.config.extend) if r.config.ready else r.config.steps for r in runs)
+    grid = np.linspace(end / GRID_POINTS, end, GRID_POINTS)
     summaries = []
-    finished = [r for r in experiment.runs() if r.finished(root)]
+    finished = [r for r in runs if r.finished(root)]
     stored = read_training_curves(root, grid)
     for cell in experiment.cells:
         runs = [r for r in finished if r.cell == cell]
@@ -103,7 +106,9 @@ def summarize(experiment: Experiment, root: Path) -> tuple[np.ndarray, list[Cell
                 limit = run.config.env_kwargs.get("max_episode_steps", MAX_EPISODE_STEPS)
                 legs = 2 if "from_steps" in record else 1  # a continued run lost an unfinished episode per env twice
                 check_monitor_coverage(folder, record["steps"], run.config.n_envs, limit, legs=legs)
-                curves.append(success_curve(folder, grid))
+                curve = success_curve(folder, grid)
+                curve[grid > record["steps"] + grid[0] / 2] = np.nan  # nothing past the run's own end
+                curves.append(curve)
             elif (cell, run.seed) in stored:
                 curves.append(stored[(cell, run.seed)])
             else:
@@ -248,6 +253,14 @@ def goal_rows(experiment: Experiment, summaries: list[CellSummary], root: Path) 
     return bases, rows
 
 
+def _run_steps(s: CellSummary) -> str:
+    """The env steps a cell's runs trained (each seed's where they differ: a budget that grew)."""
+    steps = [int(r["steps"]) for r in s.records]
+    if not steps:
+        return "-"
+    return _steps(steps[0]) if len(set(steps)) == 1 else ", ".join(_steps(round(v, -3)) for v in steps)
+
+
 def goals_markdown(experiment: Experiment, summaries: list[CellSummary], root: Path) -> str:
     """
     A goals table: per goal, its priors and per base cell the policy alone greedy and sampled (mean over seeds,
@@ -255,21 +268,23 @@ def goals_markdown(experiment: Experiment, summaries: list[CellSummary], root: P
     mean over the goals measured and the lowest goal.
     """
     bases, rows = goal_rows(experiment, summaries, root)
-    head = "| goal | priors |" + "".join(f" {b}: greedy | {b}: sampled | {b}: 90% training success |" for b in bases)
-    lines = [head, "|---" * (2 + 3 * len(bases)) + "|"]
+    head = "| goal | priors |" + "".join(f" {b}: greedy | {b}: sampled | {b}: 90% training success | {b}: env steps |"
+                                        for b in bases)
+    lines = [head, "|---" * (2 + 4 * len(bases)) + "|"]
     for row in rows:
         line = f"| {row.goal} | {', '.join(row.priors) or '-'} |"
         for b in bases:
             s = row.cells[b]
-            line += (" not run | not run | not run |" if s is None else
-                     f" {_per_seed(s.final_greedy_seeds)} | {_per_seed(s.final_alone_seeds)} | {_steps(s.steps_to_90)} |")
+            line += (" not run | not run | not run | |" if s is None else
+                     f" {_per_seed(s.final_greedy_seeds)} | {_per_seed(s.final_alone_seeds)} | {_steps(s.steps_to_90)} | "
+                     f"{_run_steps(s)} |")
         lines.append(line)
     for label, pick in (("mean over the goals run", np.mean), ("lowest goal", np.min)):
         line = f"| **{label}** | |"
         for b in bases:
             done = [r.cells[b] for r in rows if r.cells[b] is not None and r.cells[b].final_greedy_seeds]
             if not done:
-                line += " - | - | |"
+                line += " - | - | | |"
                 continue
             greedy = [float(np.mean(s.final_greedy_seeds)) for s in done]
             sampled = [float(np.mean(s.final_alone_seeds)) for s in done]
@@ -277,7 +292,7 @@ def goals_markdown(experiment: Experiment, summaries: list[CellSummary], root: P
             if pick is np.min:
                 which = f" ({done[int(np.argmin(greedy))].cell.split('@')[1]}; sampled: "
                 which += f"{done[int(np.argmin(sampled))].cell.split('@')[1]})"
-            line += f" **{pick(greedy):.2f}**{which if pick is np.min else ''} | **{pick(sampled):.2f}** | |"
+            line += f" **{pick(greedy):.2f}**{which if pick is np.min else ''} | **{pick(sampled):.2f}** | | |"
         lines.append(line)
     return "\n".join(lines)
 

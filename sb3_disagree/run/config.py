@@ -68,6 +68,10 @@ class RunConfig:
     :param greedy_phase: The last this many env steps act by the new policy's argmax (``greedy_epsilon`` of its own
         samples), so that the harvested paths are those the saved argmax walks (0: none)
     :param greedy_epsilon: The policy's own weight in the behaviour during the greedy phase, in (0, 1]
+    :param ready: The greedy phase starts at its step only if the training success over the last 100 episodes has
+        reached this by then; otherwise the run trains on until it has (or until its budget times ``extend`` less the
+        phase), then the phase runs its steps: a goal slow to learn gets more env steps (0: the phase never waits)
+    :param extend: The most a run's budget may grow while its greedy phase waits, as a multiple of ``steps`` (>= 1)
     :param consistency_epochs: Passes over the harvest's labels
     :param consistency_validation: The fit keeps the epoch whose greedy success over this many validation episodes
         (env seeds of their own, cut at ``VALIDATION_MAX_STEPS``) is highest (0: the last epoch's)
@@ -114,6 +118,8 @@ class RunConfig:
     consistency_harvest: Optional[int] = None
     greedy_phase: Optional[int] = None
     greedy_epsilon: float = 0.2
+    ready: Optional[float] = None
+    extend: Optional[float] = None
     consistency_epochs: int = 3
     consistency_validation: Optional[int] = None
     acer_kwargs: dict[str, Any] = field(default_factory=dict)
@@ -180,6 +186,10 @@ class RunConfig:
         if not 0 <= self.greedy_phase <= self.steps or not 0 < self.greedy_epsilon <= 1:
             raise ValueError("--greedy-phase must be between 0 and --steps and --greedy-epsilon in (0, 1], got "
                              f"{self.greedy_phase} and {self.greedy_epsilon}")
+        if not 0 <= self.ready <= 1 or not 1 <= self.extend <= 10:
+            raise ValueError(f"--ready must be in [0, 1] and --extend between 1 and 10, got {self.ready} and {self.extend}")
+        if self.ready and not self.greedy_phase:
+            raise ValueError("--ready decides when the greedy phase starts: give --greedy-phase too (or --ready 0)")
         if self.greedy_phase and self.mode == "ppo":
             raise ValueError("--greedy-phase is a behaviour of ACER; --mode ppo trains SB3's PPO without one")
         if self.consistency_epochs < 1:

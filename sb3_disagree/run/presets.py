@@ -13,7 +13,7 @@ PRESETS = Path(__file__).resolve().parents[1] / "hyperparams" / "modes.yml"
 # The RunConfig fields a preset may set, and what the library ran with before a preset set them (a saved config
 # without one of them ran with this).
 RESOLVED = {"overlap": False, "finish": False, "frame_stack": 1, "loop_flags": False, "consistency_harvest": 0,
-            "greedy_phase": 0, "consistency_validation": 0}
+            "greedy_phase": 0, "consistency_validation": 0, "ready": 0.0, "extend": 1.0}
 
 
 @functools.lru_cache(maxsize=1)
@@ -74,6 +74,10 @@ def resolve(fields: dict[str, Any], images: bool) -> dict[str, Any]:
         phase = run["greedy_phase"]
         harvest = max(0, min(_int(out["consistency_harvest"]), _int(fields.get("steps"))))
         out["greedy_phase"] = harvest if phase == "harvest" else phase
+    if "ready" not in given and not out["greedy_phase"]:  # nothing waits where there is no greedy phase
+        out["ready"] = 0.0
+    if "extend" not in given and not out["ready"]:  # and a budget that never waits never grows
+        out["extend"] = 1.0
     if "consistency_validation" not in given:
         out["consistency_validation"] = run["consistency_validation"] if out["consistency_harvest"] else 0
     acer = dict(fields.get("acer_kwargs") or {})

@@ -23,6 +23,7 @@ from stable_baselines3.common.callbacks import BaseCallback, CallbackList
 from sb3_disagree.acer import ACER
 from sb3_disagree.behaviour import OnPolicyBehaviour
 from sb3_disagree.finish.greedy_phase import GreedyPhase
+from sb3_disagree.finish.ready import StartWhenReady
 from sb3_disagree.finish.consistency import HarvestLabels, RoundStats, greedy_consistency
 from sb3_disagree.run.allocator import keep_freed_memory
 from sb3_disagree.checkpoints import (BUFFER, Checkpoint, replace_model, resume_point, save_checkpoint,
@@ -114,12 +115,14 @@ def train(config: RunConfig, out: Path = Path("runs"), resume: Optional[Path] = 
             behaviour = GreedyPhase(behaviour or OnPolicyBehaviour(), config.steps - config.greedy_phase,
                                     config.greedy_epsilon)
         saved_config = dict(asdict(config), chosen_priors=prior_names, similarities=sims)
+        # A run whose greedy phase waits for it to be ready may train up to its budget times `extend`.
+        budget = int(config.steps * config.extend) if config.ready else config.steps
         if resume is not None:
             model = _resumed_model(config, run_dir, env, behaviour, checkpoint, trust)
-            remaining = max(config.steps - model.num_timesteps, 0)
+            remaining = max(budget - model.num_timesteps, 0)
         else:
             model = new_model(config, env, behaviour, priors)
-            remaining = config.steps
+            remaining = budget
             (run_dir / "config.yaml").write_text(yaml.safe_dump(saved_config, sort_keys=False))
     except BaseException:
         if created is not None:  # a failed start leaves nothing behind
@@ -137,6 +140,12 @@ def train(config: RunConfig, out: Path = Path("runs"), resume: Optional[Path] = 
     if config.consistency_harvest:  # a resumed run keeps what it trains from here on
         harvest = HarvestLabels(config.steps - config.consistency_harvest)
         own.append(harvest)
+    when_ready = None
+    if config.ready:  # first: it moves the phase's and the harvest's start before they act on a step
+        # (a resumed run looks at its training success afresh)
+        when_ready = StartWhenReady(behaviour, harvest, config.steps - config.greedy_phase, budget - config.greedy_phase,
+                                    config.greedy_phase, config.consistency_harvest, config.ready)
+        own.insert(0, when_ready)
     finished = True
     try:
         with sigterm_as_interrupt():
@@ -148,6 +157,8 @@ def train(config: RunConfig, out: Path = Path("runs"), resume: Optional[Path] = 
     with sigterm_as_interrupt():
         save_checkpoint(model, run_dir, with_buffer=not finished)
         saved_config.update(num_timesteps=int(model.num_timesteps), finished=finished)
+        if when_ready is not None:
+            saved_config["greedy_start"] = when_ready.started
         write_atomic(run_dir / "config.yaml", yaml.safe_dump(saved_config, sort_keys=False))
     env.close()
     if finished and harvest is not None:
