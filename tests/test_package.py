@@ -82,7 +82,7 @@ def test_the_wheel_works_alone_from_another_folder(tmp_path):
     assert "fig3-bathtub" in run(dopt, "experiment", "list")
     assert "CartPole-v1" in run(str(python), "-c", "from sb3_disagree.rl_zoo import HYPERPARAMS; "
                                                    "print((HYPERPARAMS / 'acer.yml').read_text())")
-    out = run(dopt, "train", "--goal", "bathtub", "--steps", "400", "--card-episodes", "1")  # the RGB apartment
+    out = run(dopt, "train", "--goal", "bathtub", "--steps", "400", "--card-episodes", "1", "--ready", "0")  # RGB
     assert "done: 400 steps" in " ".join(out.split())
     assert (work / "runs" / "sb3_disagree__Apartment-v0" / "bathtub" / "kickstart-0" / "README.md").exists()
     run(str(python), "-c", "import gymnasium as gym, sb3_disagree; env = gym.make('sb3_disagree/Office-v0', "

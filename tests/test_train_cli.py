@@ -158,7 +158,8 @@ def test_dopt_train_runs_exactly_what_runconfig_resolves(args, monkeypatch, tmp_
 def test_greedy_phase_takes_the_end_of_the_budget(zoo, tmp_path):
     import pandas as pd
 
-    result = runner.invoke(app, _train_args(zoo, tmp_path, "--mode", "kickstart", "--greedy-phase", "200"))
+    # (--ready 0: the phase does not wait for the run to be ready, tested in test_consistency.py)
+    result = runner.invoke(app, _train_args(zoo, tmp_path, "--mode", "kickstart", "--greedy-phase", "200", "--ready", "0"))
     assert result.exit_code == 0, result.output
     run = tmp_path / "sb3_disagree__ApartmentState-v0" / "bathtub" / "kickstart-0"
     log = pd.read_csv(run / "progress.csv").dropna(subset=["behaviour/greedy_phase"])
@@ -309,7 +310,7 @@ def _checkpoint(run):
 
 
 def test_interrupt_saves_and_resume_continues_the_step_count(zoo, tmp_path):
-    config = RunConfig(goal="bathtub", env_id=STATE_ID, steps=600, n_envs=2, zoo=str(zoo), overlap=False)
+    config = RunConfig(goal="bathtub", env_id=STATE_ID, steps=600, n_envs=2, zoo=str(zoo), overlap=False, ready=0)
     run, model, finished = train(config, tmp_path, callbacks=[StopAt(200)])
     assert not finished and (_checkpoint(run) / "replay_buffer.npz").exists() and (run / "model.zip").exists()
     stopped_at = model.num_timesteps
@@ -338,7 +339,7 @@ def test_resumed_run_appends_to_its_history(zoo, tmp_path):
         return [pd.read_csv(f, skiprows=1) for f in sorted((run / "monitor").glob("*.monitor.csv"))]
 
     config = RunConfig(goal="bathtub", env_id=STATE_ID, steps=1000, n_envs=2, zoo=str(zoo), eval_every=500,
-                       eval_episodes=1)
+                       eval_episodes=1, ready=0)
     run, _, _ = train(config, tmp_path)  # episodes last at most 500 steps: each env ends one at least
     first = episodes(run)
     assert all(len(m) for m in first)

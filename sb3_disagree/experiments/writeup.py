@@ -200,9 +200,10 @@ def _body(experiment: Experiment, grid, summaries: list, figure_link: str, note:
             "Table: steps to 50%/90% and success at "
             "the budgets read from the mean training curve; AUC is the mean of that curve over the run; the new policy "
             f"alone (final) is evaluated over {experiment.final_episodes} episodes after training{final_how}, per seed "
-            "in brackets.\n\n"
-            f"Per seed, read from each seed's own training curve (the same 50-episode window):\n\n"
-            f"{seeds_markdown(summaries)}\n")
+            "in brackets.\n")
+    if not experiment.goals:  # a goals table gives each seed's numbers already
+        body += ("\nPer seed, read from each seed's own training curve (the same 50-episode window):\n\n"
+                 f"{seeds_markdown(summaries)}\n")
     alone = alone_markdown(summaries)
     if alone is not None:
         body += ("\nThe new policy alone along the way (each run's periodic evaluation, "
