@@ -245,6 +245,9 @@ def _show_end(run_dir: Path, model, finished: bool, goal: str) -> None:
     if finished:
         phase = saved.get("consistency") or {}
         line = f"done: {model.num_timesteps:,} steps"
+        start, budget = saved.get("greedy_start"), int(saved.get("steps") or 0)
+        if start is not None and start > budget - int(saved.get("greedy_phase") or 0):
+            line += f" (the greedy phase waited for {saved.get('ready')} training success: it began at {int(start):,})"
         if phase.get("env_steps"):
             line += f" of training and {int(phase['env_steps']):,} of the greedy-consistency phase"
         harvest = phase.get("harvest")  # labels from the training's own last episodes

@@ -488,6 +488,8 @@ def test_dopt_train_extends_a_run_whose_greedy_phase_waits_for_it(tmp_path):
     saved = yaml.safe_load((run_dir / "config.yaml").read_text())
     # never ready (not 100 episodes at this budget): the phase at 1.5 * 480 - 160, for 160 steps
     assert saved["greedy_start"] == 560 and saved["num_timesteps"] == 720 and saved["steps"] == 480
+    assert "done: 720 steps (the greedy phase waited for 1.0 training success: it began at 560)" in " ".join(
+        result.output.split())
     for bad in (["--ready", "1.5"], ["--extend", "0.5"], ["--greedy-phase", "0", "--ready", "0.9"]):
         result = runner.invoke(app, [*base, "--force", *bad])
         assert result.exit_code == 2 and ("--ready" in result.output or "--extend" in result.output), result.output
