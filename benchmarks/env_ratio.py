@@ -1,7 +1,8 @@
 """
 `dopt train`'s default against its own env, back to back in one run: the raw RGB apartment stepped with random
 actions on one core, then `dopt train --goal bathtub`'s configuration (``RunConfig(goal="bathtub")``, everything as
-shipped but the run's length fixed) over ``--steps`` env steps after a warm-up. The ratio of the two is printed last. Run it on a quiet machine.
+shipped but the run's length fixed) over ``--steps`` env steps after a warm-up. The ratio of the two is printed last.
+Run it on a quiet machine.
 
     python benchmarks/env_ratio.py [--steps 40000] [--warm 2400] [--raw-steps 20000] [--write]
 """

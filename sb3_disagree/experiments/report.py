@@ -87,12 +87,12 @@ def alone_curve(folders: list[Path], key: str = "successes") -> tuple[np.ndarray
 
 def summarize(experiment: Experiment, root: Path) -> tuple[np.ndarray, list[CellSummary]]:
     """Read every finished run of the experiment under ``root`` and summarise each cell."""
-    runs = experiment.runs()
+    every_run = experiment.runs()
     # A run whose greedy phase waits until it is ready may train past its budget, up to `extend` times it.
-    end = max(int(r.config.steps * r.config.extend) if r.config.ready else r.config.steps for r in runs)
+    end = max(int(r.config.steps * r.config.extend) if r.config.ready else r.config.steps for r in every_run)
     grid = np.linspace(end / GRID_POINTS, end, GRID_POINTS)
     summaries = []
-    finished = [r for r in runs if r.finished(root)]
+    finished = [r for r in every_run if r.finished(root)]
     stored = read_training_curves(root, grid)
     for cell in experiment.cells:
         runs = [r for r in finished if r.cell == cell]
@@ -289,10 +289,10 @@ def goals_markdown(experiment: Experiment, summaries: list[CellSummary], root: P
             greedy = [float(np.mean(s.final_greedy_seeds)) for s in done]
             sampled = [float(np.mean(s.final_alone_seeds)) for s in done]
             which = ""
-            if pick is np.min:
-                which = f" ({done[int(np.argmin(greedy))].cell.split('@')[1]}; sampled: "
-                which += f"{done[int(np.argmin(sampled))].cell.split('@')[1]})"
-            line += f" **{pick(greedy):.2f}**{which if pick is np.min else ''} | **{pick(sampled):.2f}** | | |"
+            if pick is np.min:  # the goals that are lowest
+                goal_of = [s.cell.split("@")[1] for s in done]
+                which = f" ({goal_of[int(np.argmin(greedy))]}; sampled: {goal_of[int(np.argmin(sampled))]})"
+            line += f" **{pick(greedy):.2f}**{which} | **{pick(sampled):.2f}** | | |"
         lines.append(line)
     return "\n".join(lines)
 

@@ -135,9 +135,9 @@ def acer_text(summaries: list) -> str:
     bases: dict[str, list[dict]] = {}
     for cell, d in differs.items():
         bases.setdefault(cell.split("@")[0], []).append(d)
-    named = {base: ds[0] for base, ds in bases.items() if all(d == ds[0] for d in ds)}
-    own = [f"{base} {flow(d)}" for base, d in named.items() if d]
-    own += [f"{cell} {flow(d)}" for cell, d in differs.items() if d and cell.split("@")[0] not in named]
+    alike = {base: ds[0] for base, ds in bases.items() if all(d == ds[0] for d in ds)}
+    own = [f"{base} {flow(d)}" for base, d in alike.items() if d]
+    own += [f"{cell} {flow(d)}" for cell, d in differs.items() if d and cell.split("@")[0] not in alike]
     return flow(common) + (f"; the cells' own: {'; '.join(own)}" if own else "")
 
 
