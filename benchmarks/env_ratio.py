@@ -64,7 +64,7 @@ def main() -> None:
     body = (f"Command: `python benchmarks/env_ratio.py --steps {args.steps} --warm {args.warm} --raw-steps "
             f"{args.raw_steps}`; {platform.machine()}, {os.cpu_count()} cores, nothing else running. The raw RGB "
             f"apartment with random actions on one core over {args.raw_steps} env steps, then `dopt train --goal "
-            f"bathtub`'s configuration over {args.steps} env steps after a {args.warm}-step warm-up, in the same "
+            f"bathtub`'s configuration (its length fixed: `ready=0`) over {args.steps} env steps after a {args.warm}-step warm-up, in the same "
             "process.\n\n| raw env (env steps/s) | default dopt train (env steps/s) | ratio |\n|---|---|---|\n"
             f"| {raw:.0f} | {default:.0f} | {default / raw:.0%} |\n")
     if args.write:
