@@ -2,6 +2,8 @@
 
 import copy
 import io
+import threading
+import time
 import zipfile
 
 import numpy as np
@@ -258,6 +260,33 @@ def test_overlap_is_deterministic():
     assert th.equal(weights[0], weights[1])
 
 
+class SlowWorkerACER(ACER):
+    """Records the entropy weight of each on-policy update and of each replay update; the worker's updates start
+    late, so that the rollouts have moved the progress on by then."""
+
+    def _update(self, segment, policy=None, reference=None, coefs=None):
+        replaying = threading.current_thread().name.startswith("acer-replay")
+        if replaying:
+            time.sleep(0.02)
+        stats = super()._update(segment, policy, reference, coefs)
+        self.events = [*getattr(self, "events", []), ("replay" if replaying else "own", stats["ent_coef"])]
+        return stats
+
+
+def test_overlapped_replays_use_the_weights_of_their_hand_over():
+    model = SlowWorkerACER("MlpPolicy", make_vec_env(ChainEnv, n_envs=2, seed=0), n_steps=5, seed=0, replay_start=10,
+                           overlap=True, ent_coef="lin_0.5")
+    model.learn(300)
+    replays = 0
+    for i, (kind, coef) in enumerate(model.events):
+        if kind == "replay":
+            # The latest on-policy update before it is its segment's hand-over (the next waits for the worker).
+            own = next(c for k, c in reversed(model.events[:i]) if k == "own")
+            assert coef == own
+            replays += 1
+    assert replays > 10 and len({c for _, c in model.events}) > 10  # the weight moved while replays ran
+
+
 def test_overlap_interrupted_learns_what_was_collected():
     model = ACER("MlpPolicy", make_vec_env(ChainEnv, n_envs=2, seed=0), n_steps=5, seed=0, replay_start=10,
                  overlap=True)
@@ -277,9 +306,9 @@ class CountingACER(ACER):
         self.draws = [*getattr(self, "draws", []), n]
         return n
 
-    def replay(self, policy, n_replay, rng=None, batches=None):
+    def replay(self, policy, n_replay, rng=None, batches=None, coefs=None):
         self.batches = [*getattr(self, "batches", []), n_replay]
-        return super().replay(policy, n_replay, rng, batches)
+        return super().replay(policy, n_replay, rng, batches, coefs)
 
 
 def test_overlap_caps_the_replays_per_segment_and_carries_the_rest():

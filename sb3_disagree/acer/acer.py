@@ -397,14 +397,16 @@ class ACER(BaseAlgorithm):
         return th.softmax(policy.average_logits(obs), dim=-1)
 
     def _update(self, segment: Segment, policy: Optional[ACERPolicy] = None,
-                reference: Optional[th.Tensor] = None) -> dict[str, float]:
+                reference: Optional[th.Tensor] = None, coefs: Optional[tuple[float, float]] = None) -> dict[str, float]:
         """
         One gradient step of ``policy`` (``self.policy`` if None) on a (T, E) segment batch; returns statistics.
 
         :param reference: The trust region's reference on the segment's T * E states, the average network's
             probabilities (computed here from ``policy``'s average network if None)
+        :param coefs: The entropy and distillation weights to use (:meth:`scheduled_coefs`; read now if None)
         """
         policy = self.policy if policy is None else policy
+        ent_coef, distill_coef = self.scheduled_coefs() if coefs is None else coefs
         n_steps, n_envs = segment.actions.shape
         n = n_steps * n_envs
         obs = self._segment_obs(segment)
@@ -437,7 +439,6 @@ class ACER(BaseAlgorithm):
         # The policy objective as a function of the probability vector f, where the trust region acts.
         f = probs.detach().requires_grad_(True)
         terms = policy_terms(f, actions, q_values.detach(), values, q_ret, rho, self.c)
-        ent_coef = float(self._ent_coef_schedule(self._current_progress_remaining))
         objective = (terms.truncated_is + terms.bias_correction + ent_coef * terms.entropy).mean()
         (g,) = th.autograd.grad(objective * n, f)
         tr_scale = th.zeros(n, device=self.device)
@@ -446,7 +447,7 @@ class ACER(BaseAlgorithm):
             k = -average_probs / (f.detach() + EPS)
             g, tr_scale = trust_region_project(g, k, self.delta)
         loss = -(probs * g.detach()).sum() / n + self.q_coef * q_loss
-        distill_coef, distill = self.distill_weight(), th.zeros(())
+        distill = th.zeros(())
         if distill_coef > 0 and segment.teacher is not None:
             teacher = th.as_tensor(segment.teacher, device=self.device).reshape(n, -1)
             has_teacher = (teacher.sum(-1) > 0).float()
@@ -475,6 +476,11 @@ class ACER(BaseAlgorithm):
             "ent_coef": ent_coef,
             **({"distill_loss": distill.item(), "distill_coef": distill_coef} if self.distill_coef > 0 else {}),
         }
+
+    def scheduled_coefs(self) -> tuple[float, float]:
+        """The entropy and distillation weights at the current progress. A replay update in the overlapped loop's
+        worker is given those of its segment's hand-over: the rollouts move the progress on meanwhile."""
+        return float(self._ent_coef_schedule(self._current_progress_remaining)), self.distill_weight()
 
     def distill_weight(self) -> float:
         """The distillation weight now: ``distill_coef * max(0, 1 - num_timesteps / distill_steps)``."""
@@ -514,12 +520,14 @@ class ACER(BaseAlgorithm):
         return int(np.random.poisson(self.replay_ratio) if rng is None else rng.poisson(self.replay_ratio))
 
     def replay(self, policy: ACERPolicy, n_replay: int, rng: Optional[np.random.Generator] = None,
-                batches: Optional[list[tuple[Segment, th.Tensor]]] = None) -> int:
+               batches: Optional[list[tuple[Segment, th.Tensor]]] = None,
+               coefs: Optional[tuple[float, float]] = None) -> int:
         """``n_replay`` updates of ``policy`` on segments drawn from the replay buffer with ``rng``, or on
-        ``batches`` (segments with their trust region's reference, :meth:`replay_references`) where given."""
+        ``batches`` (segments with their trust region's reference, :meth:`replay_references`) where given, with
+        the weights ``coefs`` (:meth:`scheduled_coefs`; read at each update if None)."""
         for i in range(n_replay):
             segment, reference = (self.replay_buffer.sample(rng), None) if batches is None else batches[i]
-            self._update(segment, policy, reference)
+            self._update(segment, policy, reference, coefs)
         return n_replay
 
     def replay_references(self, policy: ACERPolicy, n_replay: int, rng: np.random.Generator) -> list[tuple[Segment, th.Tensor]]:

@@ -68,7 +68,9 @@ def overlapped_updates(model: Any) -> Iterator[Callable[[Segment], None]]:
             th.set_num_threads(threads)
             batches = model.replay_references(learner, n_replay, samples)
             th.set_num_threads(half)
-        pending.append(replays.submit(model.replay, learner, n_replay, samples, batches))
+        # The weights of this hand-over, as the sequential loop would use: the worker must not read the progress
+        # that the next rollout moves on (the run would depend on the threads' timing).
+        pending.append(replays.submit(model.replay, learner, n_replay, samples, batches, model.scheduled_coefs()))
 
     threads = th.get_num_threads()
     half = max(1, threads // 2)
