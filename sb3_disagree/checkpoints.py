@@ -16,7 +16,7 @@ import os
 import shutil
 import signal
 import threading
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any, Optional
 
@@ -57,10 +57,12 @@ def log_sizes(run_dir: Path) -> dict[str, int]:
     return sizes
 
 
-def save_checkpoint(model: Any, run_dir: Path, with_buffer: bool = True) -> Path:
+def save_checkpoint(model: Any, run_dir: Path, with_buffer: bool = True, extra: Optional[dict[str, Any]] = None) -> Path:
     """
     Write a checkpoint of ``model`` (and its replay buffer) under ``run_dir/checkpoints``, then copy its model
     to ``run_dir/model.zip`` by a rename; keep the two newest checkpoints (only this one without a buffer).
+
+    :param extra: What else the run must resume with, kept in the checkpoint's ``state.json``
 
     :return: The checkpoint's folder
     """
@@ -78,7 +80,7 @@ def save_checkpoint(model: Any, run_dir: Path, with_buffer: bool = True) -> Path
     for path in files.values():
         _fsync(path)
     state = {"num_timesteps": int(model.num_timesteps), "files": {n: _sha256(p) for n, p in files.items()},
-             "logs": log_sizes(run_dir)}
+             "logs": log_sizes(run_dir), **(extra or {})}
     write_atomic(tmp / STATE, json.dumps(state, indent=2) + "\n")
     if folder.exists():
         shutil.rmtree(folder)
@@ -187,11 +189,12 @@ class Checkpoint(BaseCallback):
 
     :param run_dir: The run's folder
     :param every: Env steps between checkpoints
+    :param extra: Called at each checkpoint for what else the run must resume with (:func:`save_checkpoint`)
     """
 
-    def __init__(self, run_dir: Path, every: int) -> None:
+    def __init__(self, run_dir: Path, every: int, extra: Optional[Callable[[], dict[str, Any]]] = None) -> None:
         super().__init__()
-        self.run_dir, self.every = run_dir, every
+        self.run_dir, self.every, self.extra = run_dir, every, extra
         self.next = 0
 
     def _on_training_start(self) -> None:
@@ -200,7 +203,7 @@ class Checkpoint(BaseCallback):
     def _on_rollout_start(self) -> None:
         # Before a rollout: the last segment is learned from (and in the replay buffer), the logs written.
         if self.model.num_timesteps >= self.next:
-            save_checkpoint(self.model, self.run_dir)
+            save_checkpoint(self.model, self.run_dir, extra=self.extra() if self.extra else None)
             self.next = (self.model.num_timesteps // self.every + 1) * self.every
 
     def _on_step(self) -> bool:

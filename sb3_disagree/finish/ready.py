@@ -24,23 +24,34 @@ class StartWhenReady(BaseCallback):
     :param length: The phase's env steps
     :param harvest_length: The harvest's env steps, the run's last (it starts with the phase where they are equal)
     :param ready: Training success (last 100 episodes, ``rollout/success_rate``) the run must show
+    :param started: The env step at which the phase began before the run was interrupted: a resumed run keeps it
+        (its training success is not saved, and the phase's own episodes would judge it)
     """
 
     def __init__(self, phase: GreedyPhase, harvest: Optional[Any], planned: int, latest: int, length: int,
-                 harvest_length: int, ready: float) -> None:
+                 harvest_length: int, ready: float, started: Optional[int] = None) -> None:
         super().__init__()
         if not planned <= latest:
             raise ValueError(f"the latest start of the greedy phase ({latest}) is before its planned one ({planned})")
         self.phase, self.harvest = phase, harvest
         self.planned, self.latest, self.length, self.ready = planned, latest, length, ready
         self.harvest_length = harvest_length
-        self.started: Optional[int] = None  # the env step at which the phase began
+        self.started = started  # the env step at which the phase began
 
     def success(self) -> float:
         """The training success over the last 100 episodes; 0 until there are 100 (early on, the episodes that have
         ended are mostly the successful ones)."""
         buffer = self.model.ep_success_buffer
         return float(np.mean(buffer)) if len(buffer) == buffer.maxlen else 0.0
+
+    def _on_training_start(self) -> None:
+        if self.started is not None:
+            self._set_start(self.started)
+            self.model.end_at(self.started + self.length)
+
+    def state(self) -> dict[str, Optional[int]]:
+        """What a checkpoint keeps of it: where the phase began (None while it has not)."""
+        return {"greedy_start": self.started}
 
     def _on_step(self) -> bool:
         if self.started is not None or self.num_timesteps < self.planned:

@@ -129,23 +129,26 @@ def train(config: RunConfig, out: Path = Path("runs"), resume: Optional[Path] = 
             shutil.rmtree(created, ignore_errors=True)
         raise
     model.set_logger(run_logger(run_dir, append=resume is not None))
-    own: list[BaseCallback] = []
+    harvest = None
+    if config.consistency_harvest:  # a resumed run keeps what it trains from here on
+        harvest = HarvestLabels(config.steps - config.consistency_harvest)
+    when_ready = None
+    if config.ready:
+        # A resumed run keeps the phase's start; one whose phase had not begun looks at its training success afresh,
+        # as does one continued to a larger budget (its phase moves to the new budget's end).
+        started = checkpoint[1].get("greedy_start") if checkpoint and steps is None else None
+        when_ready = StartWhenReady(behaviour, harvest, config.steps - config.greedy_phase, budget - config.greedy_phase,
+                                    config.greedy_phase, config.consistency_harvest, config.ready, started=started)
+    # First: it moves the phase's and the harvest's start before they act on a step.
+    own: list[BaseCallback] = [when_ready] if when_ready else []
     if config.record_trajectories:
         own.append(RecordTrajectories(run_dir / "trajectories.jsonl"))
     if config.eval_every:
         own.append(EvaluateAlone(config, run_dir, append=resume is not None, upto=model.num_timesteps))
     if config.checkpoint_every:
-        own.append(Checkpoint(run_dir, config.checkpoint_every))
-    harvest = None
-    if config.consistency_harvest:  # a resumed run keeps what it trains from here on
-        harvest = HarvestLabels(config.steps - config.consistency_harvest)
+        own.append(Checkpoint(run_dir, config.checkpoint_every, when_ready.state if when_ready else None))
+    if harvest is not None:
         own.append(harvest)
-    when_ready = None
-    if config.ready:  # first: it moves the phase's and the harvest's start before they act on a step
-        # (a resumed run looks at its training success afresh)
-        when_ready = StartWhenReady(behaviour, harvest, config.steps - config.greedy_phase, budget - config.greedy_phase,
-                                    config.greedy_phase, config.consistency_harvest, config.ready)
-        own.insert(0, when_ready)
     finished = True
     try:
         with sigterm_as_interrupt():
@@ -155,7 +158,7 @@ def train(config: RunConfig, out: Path = Path("runs"), resume: Optional[Path] = 
         finished = False
     # A finished run keeps no replay buffer (a continuation starts with an empty one); an interrupted one does.
     with sigterm_as_interrupt():
-        save_checkpoint(model, run_dir, with_buffer=not finished)
+        save_checkpoint(model, run_dir, with_buffer=not finished, extra=when_ready.state() if when_ready else None)
         saved_config.update(num_timesteps=int(model.num_timesteps), finished=finished)
         if when_ready is not None:
             saved_config["greedy_start"] = when_ready.started
