@@ -481,12 +481,12 @@ def test_a_goals_table_reads_each_goals_priors_and_its_mean_and_lowest_goal(tmp_
     for goal, priors in (("bathtub", ["shower", "toilet"]), ("toilet", ["bathtub", "shower"])):
         (tmp_path / f"a@{goal}" / "seed-0").mkdir(parents=True)
         (tmp_path / f"a@{goal}" / "seed-0" / "config.yaml").write_text(yaml.safe_dump({"chosen_priors": priors}))
-    summaries = [cell("a@bathtub", [0.9, 0.8], [1.0, 1.0], 40_000), cell("b@bathtub", [0.5, 0.7], [0.9, 1.0], None),
+    summaries = [cell("a@bathtub", [0.9, 0.8], [1.0, 1.0], 40_000, (127_440, 127_360)), cell("b@bathtub", [0.5, 0.7], [0.9, 1.0], None),
                  cell("a@toilet", [0.6, 0.4], [0.98, 0.96], 62_000, (100_000, 150_640))]  # bed not run; b not run on the toilet
     rows = goals_markdown(experiment, summaries, tmp_path).splitlines()
     assert rows[0].startswith("| goal | priors | a: greedy | a: sampled | a: 90% training success | a: env steps | "
                               "b: greedy |")
-    assert rows[2] == ("| bathtub | shower, toilet | 0.85 (0.90, 0.80) | 1.00 (1.00, 1.00) | 40k | 100k | 0.60 (0.50, 0.70) | "
+    assert rows[2] == ("| bathtub | shower, toilet | 0.85 (0.90, 0.80) | 1.00 (1.00, 1.00) | 40k | 127k | 0.60 (0.50, 0.70) | "
                        "0.95 (0.90, 1.00) | not reached | 100k |")
     assert rows[3] == ("| toilet | bathtub, shower | 0.50 (0.60, 0.40) | 0.97 (0.98, 0.96) | 62k | 100k, 151k | not run | "
                        "not run | not run | |")

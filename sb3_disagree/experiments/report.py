@@ -258,7 +258,8 @@ def _run_steps(s: CellSummary) -> str:
     steps = [int(r["steps"]) for r in s.records]
     if not steps:
         return "-"
-    return _steps(steps[0]) if len(set(steps)) == 1 else ", ".join(_steps(round(v, -3)) for v in steps)
+    steps = [round(v, -3) for v in steps]  # to the thousand: a grown budget ends at a segment's end
+    return _steps(steps[0]) if len(set(steps)) == 1 else ", ".join(_steps(v) for v in steps)
 
 
 def goals_markdown(experiment: Experiment, summaries: list[CellSummary], root: Path) -> str:
