@@ -1,8 +1,9 @@
-"""Tiny environments for the tests."""
+"""Tiny environments for the tests, and a callback that interrupts a run."""
 
 import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
+from stable_baselines3.common.callbacks import BaseCallback
 
 
 class ChainEnv(gym.Env):
@@ -111,3 +112,16 @@ class TurnEnv(gym.Env):
     def expert_action(self) -> int:
         """Face east (turning the short way round; from west, left), then move."""
         return {0: 2, 1: 1, 2: 0, 3: 0}[self.heading]
+
+
+class StopAt(BaseCallback):
+    """Interrupt training (as Ctrl-C does) once ``at`` env steps are reached."""
+
+    def __init__(self, at: int) -> None:
+        super().__init__()
+        self.at = at
+
+    def _on_step(self) -> bool:
+        if self.num_timesteps >= self.at:
+            raise KeyboardInterrupt
+        return True

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 import torch as th
 import yaml
-from envs import TurnEnv
+from envs import StopAt, TurnEnv
 from stable_baselines3.common.env_util import make_vec_env
 from stable_baselines3.common.evaluation import evaluate_policy
 from typer.testing import CliRunner
@@ -495,24 +495,13 @@ def test_dopt_train_extends_a_run_whose_greedy_phase_waits_for_it(tmp_path):
         assert result.exit_code == 2 and ("--ready" in result.output or "--extend" in result.output), result.output
 
 
-class _StopAt(BaseCallback):
-    def __init__(self, at):
-        super().__init__()
-        self.at = at
-
-    def _on_step(self):
-        if self.num_timesteps >= self.at:
-            raise KeyboardInterrupt
-        return True
-
-
 @pytest.mark.parametrize("stop", [400, 640])  # before the phase began (at 560), and in it
 def test_a_resumed_run_keeps_the_start_of_its_greedy_phase(tmp_path, stop):
     from sb3_disagree.run import RunConfig, train
 
     config = RunConfig(goal="bathtub", env_id="sb3_disagree/ApartmentState-v0", mode="scratch", steps=480, n_envs=2,
                        greedy_phase=160, consistency_harvest=160, consistency_validation=0, ready=1.0, extend=1.5)
-    run, model, finished = train(config, tmp_path, callbacks=[_StopAt(stop)])
+    run, model, finished = train(config, tmp_path, callbacks=[StopAt(stop)])
     assert not finished and model.num_timesteps < 720
     result = runner.invoke(app, ["train", "--goal", "bathtub", "--resume", str(run)])
     assert result.exit_code == 0, result.output

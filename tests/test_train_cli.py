@@ -2,7 +2,7 @@
 
 import pytest
 import yaml
-from stable_baselines3.common.callbacks import BaseCallback
+from envs import StopAt
 from stable_baselines3.common.env_util import make_vec_env
 from stable_baselines3.common.evaluation import evaluate_policy
 from typer.testing import CliRunner
@@ -289,17 +289,6 @@ def test_eval_draws_and_records_the_policy_alone(zoo, tmp_path):
     assert result.exit_code == 2 and ".gif or .mp4" in result.output
     result = runner.invoke(app, ["eval", str(run / "model.zip"), "--episodes", "2", "--stochastic"])
     assert result.exit_code == 0 and "sampled actions" in result.output and "greedy actions" not in result.output
-
-
-class StopAt(BaseCallback):
-    def __init__(self, at):
-        super().__init__()
-        self.at = at
-
-    def _on_step(self):
-        if self.num_timesteps >= self.at:
-            raise KeyboardInterrupt
-        return True
 
 
 def _checkpoint(run):
