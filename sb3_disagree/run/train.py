@@ -161,7 +161,7 @@ def train(config: RunConfig, out: Path = Path("runs"), resume: Optional[Path] = 
         save_checkpoint(model, run_dir, with_buffer=not finished, extra=when_ready.state() if when_ready else None)
         saved_config.update(num_timesteps=int(model.num_timesteps), finished=finished)
         if when_ready is not None:
-            saved_config["greedy_start"] = when_ready.started
+            saved_config.update(when_ready.state())  # greedy_start, as the checkpoint keeps it
         write_atomic(run_dir / "config.yaml", yaml.safe_dump(saved_config, sort_keys=False))
     env.close()
     if finished and harvest is not None:
