@@ -139,6 +139,10 @@ def test_summary_numbers_match_the_runs(zoo, tmp_path):
         np.testing.assert_array_equal(s.seed_final, [s.mean[-1]])  # nan where too few episodes ended
         assert s.seed_steps_to_90 == [s.steps_to_90]
     assert seeds_markdown(summaries).count("\n") == 1 + len(summaries)
+    # A budget that no run of a cell reached reads "-", not nan.
+    summaries[0].at_budgets[experiment.budgets[-1]] = float("nan")
+    row = table_markdown(experiment, summaries).splitlines()[2]
+    assert "nan" not in row and " - |" in row
 
 
 def test_report_refuses_a_run_whose_monitor_files_miss_steps(zoo, tmp_path):

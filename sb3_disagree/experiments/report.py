@@ -156,7 +156,8 @@ def table_markdown(experiment: Experiment, summaries: list[CellSummary]) -> str:
              "new policy alone (final), sampled | env steps/s | minutes per run |",
              "|---" * (9 + len(experiment.budgets)) + "|"]
     for s in summaries:
-        at = "".join(f" {s.at_budgets[b]:.2f} |" for b in experiment.budgets)
+        # "-" at a budget no run of the cell reached (a grid whose budget follows the goal)
+        at = "".join(f" {s.at_budgets[b]:.2f} |" if np.isfinite(s.at_budgets[b]) else " - |" for b in experiment.budgets)
         lines.append(f"| {s.cell} | {len(s.seeds)} | {_steps(s.steps_to_50)} | {_steps(s.steps_to_90)} |{at} "
                      f"{s.auc:.2f} | {_per_seed(s.final_greedy_seeds)} | {_per_seed(s.final_alone_seeds)} | {s.fps:.0f} | "
                      f"{s.minutes:.1f} |")
