@@ -107,7 +107,8 @@ HELPS = {
     "force": "Replace a run already in the folder.",
     "trust": "Open a saved model or a pickled embedding as SB3 and gensim do (files you made).",
 }
-BOOLS = ("overlap", "loop_flags", "record_trajectories", "average_ahead", "greedy_loops")
+BOOLS = ("overlap", "loop_flags", "record_trajectories", "average_ahead")
+FLAGS = ("greedy_loops",)  # on when given, else the mode's
 
 
 def _run_options() -> list:
@@ -126,6 +127,8 @@ def _run_options() -> list:
             str if name == "priors" else typing.get_args(p.annotation)[0] if typing.get_args(p.annotation) else p.annotation]
         if kind in (Optional[typing.Any],):
             kind = Optional[str]
+        if name in FLAGS:
+            kind = bool
         flag = "--env" if name == "env_id" else "--" + name.replace("_", "-")
         decls = "--finish/--bare" if name == "finish" else f"{flag}/--no-{flag[2:]}" if name in BOOLS else flag
         default = p.default.default if name in ("out", "force", "trust", "resume") else None
