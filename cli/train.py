@@ -55,7 +55,7 @@ PANELS = {
     "Run": ("goal", "env_id", "mode", "priors", "steps", "seed", "n_envs", "out", "resume", "force", "trust"),
     "Method": ("alpha", "beta", "entropy_offset", "jsrl_horizon", "init", "zoo", "embedding"),
     "Memory": ("frame_stack", "loop_flags"),
-    "Finish": ("finish", "consistency_harvest", "greedy_phase", "greedy_epsilon", "greedy_loops", "ready", "extend",
+    "Finish": ("finish", "consistency_harvest", "greedy_phase", "greedy_epsilon", "ready", "extend",
                "consistency_epochs", "consistency_validation"),
     "ACER": ("reward_scale", "ema_decay", "average_ahead", "features_dtype", "overlap", "vec_env"),
     "Environment": ("collision_penalty", "reward_distance"),
@@ -83,7 +83,6 @@ HELPS = {
     "consistency_harvest": "Fit model.zip to the loop-free successful paths of the last this many steps.",
     "greedy_phase": "The last this many steps act by the argmax (default: the harvest's).",
     "greedy_epsilon": "The policy's own samples in the greedy phase (default 0.2).",
-    "greedy_loops": "In the greedy phase, sample the policy where the episode saw the frame before (default off).",
     "ready": "The greedy phase waits for this training success, the run training on (default: the mode's).",
     "extend": "The most the budget grows while the phase waits, times --steps (default: the mode's).",
     "consistency_epochs": "Passes over the harvest's labels (default 3).",
@@ -108,7 +107,6 @@ HELPS = {
     "trust": "Open a saved model or a pickled embedding as SB3 and gensim do (files you made).",
 }
 BOOLS = ("overlap", "loop_flags", "record_trajectories", "average_ahead")
-FLAGS = ("greedy_loops",)  # on when given, else the mode's
 
 
 def _run_options() -> list:
@@ -127,8 +125,6 @@ def _run_options() -> list:
             str if name == "priors" else typing.get_args(p.annotation)[0] if typing.get_args(p.annotation) else p.annotation]
         if kind in (Optional[typing.Any],):
             kind = Optional[str]
-        if name in FLAGS:
-            kind = bool
         flag = "--env" if name == "env_id" else "--" + name.replace("_", "-")
         decls = "--finish/--bare" if name == "finish" else f"{flag}/--no-{flag[2:]}" if name in BOOLS else flag
         default = p.default.default if name in ("out", "force", "trust", "resume") else None

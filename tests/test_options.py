@@ -315,31 +315,6 @@ def test_greedy_phase_acts_by_the_argmax_with_an_exact_mu_after_its_start():
         GreedyPhase(PriorTeacher(FakePriors(prior_probs)), start=0, epsilon=0.0)
 
 
-def test_greedy_phase_with_loops_acts_by_pi_where_the_episode_saw_the_observation():
-    from stable_baselines3.common.logger import Logger
-
-    from sb3_disagree.behaviour import OnPolicyBehaviour
-    from sb3_disagree.finish.greedy_phase import GreedyPhase
-
-    pi = th.tensor([[0.2, 0.5, 0.3]]).expand(2, A)
-    greedy = th.tensor([0.2 * 0.2, 0.8 + 0.2 * 0.5, 0.2 * 0.3])
-    b = GreedyPhase(OnPolicyBehaviour(), start=0, epsilon=0.2, loops=True)
-    b.setup(SimpleNamespace(num_timesteps=0))
-    frames = [np.zeros((2, 4), np.uint8) + k for k in range(3)]
-    # env 0 sees frames 0, 1, 0 (a loop at the third step); env 1 sees 0, 1, 2; both episodes start anew after
-    steps = [(np.stack([frames[0][0], frames[0][1]]), [True, True]),
-             (np.stack([frames[1][0], frames[1][1]]), [False, False]),
-             (np.stack([frames[0][0], frames[2][1]]), [False, False]),
-             (np.stack([frames[0][0], frames[0][1]]), [True, False])]
-    mus = [b(obs, pi, [{}] * 2, np.array(starts)).mu for obs, starts in steps]
-    for t, mu in enumerate(mus):
-        assert th.allclose(mu[1], pi[1] if t == 3 else greedy)  # env 1 sees frame 0 again at its last step
-        assert th.allclose(mu[0], pi[0] if t == 2 else greedy)  # env 0's new episode at t=3 forgets what it saw
-    logger = Logger(None, [])
-    b.record(logger)
-    assert logger.name_to_value["behaviour/greedy_loops"] == 0.25
-
-
 def test_greedy_phase_reports_no_prior_usage_for_the_steps_it_took_over():
     from stable_baselines3.common.logger import Logger
 

@@ -155,22 +155,17 @@ def test_dopt_train_runs_exactly_what_runconfig_resolves(args, monkeypatch, tmp_
         assert library.acer_kwargs["average_ahead"] and library.acer_kwargs["reward_scale"] == 1.0
 
 
-@pytest.mark.parametrize("loops", [False, True])
-def test_greedy_phase_takes_the_end_of_the_budget(zoo, tmp_path, loops):
+def test_greedy_phase_takes_the_end_of_the_budget(zoo, tmp_path):
     import pandas as pd
 
     # (--ready 0: the phase does not wait for the run to be ready, tested in test_consistency.py)
-    extra = ["--greedy-loops"] if loops else []
-    result = runner.invoke(app, _train_args(zoo, tmp_path, "--mode", "kickstart", "--greedy-phase", "200", "--ready", "0",
-                                            *extra))
+    result = runner.invoke(app, _train_args(zoo, tmp_path, "--mode", "kickstart", "--greedy-phase", "200", "--ready", "0"))
     assert result.exit_code == 0, result.output
     run = tmp_path / "sb3_disagree__ApartmentState-v0" / "bathtub" / "kickstart-0"
     log = pd.read_csv(run / "progress.csv").dropna(subset=["behaviour/greedy_phase"])
     steps, share = log["time/total_timesteps"].to_numpy(), log["behaviour/greedy_phase"].to_numpy()
     assert (share[steps <= 200] == 0).all() and (share[steps > 240] == 1).all()  # 2 envs x 20 steps per segment
-    saved = yaml.safe_load((run / "config.yaml").read_text())
-    assert saved["greedy_phase"] == 200 and saved["greedy_loops"] is loops
-    assert ("behaviour/greedy_loops" in log) is loops  # the share of the phase's steps spent in loops
+    assert yaml.safe_load((run / "config.yaml").read_text())["greedy_phase"] == 200
 
 
 def test_periodic_evaluation_of_the_policy_alone(zoo, tmp_path):

@@ -22,24 +22,17 @@ class GreedyPhase(BehaviourPolicy):
     covers every action the policy does, so ACER's importance weights stay exact. The inner behaviour's
     teacher is kept (distillation goes on where it is still weighted).
 
-    With ``loops``, a step whose observation the env's episode has already shown (the greedy policy turns back
-    and forth or stays pressed against a wall) acts by the policy's own distribution (``mu = pi``), as the
-    greedy-consistency phase after a run does: the harvest then holds the escapes from the argmax's own loops.
-
     :param inner: The behaviour before the phase (and the source of the teacher during it)
     :param start: Env steps (the model's ``num_timesteps``) at which the phase begins
     :param epsilon: Weight of the policy's own distribution in ``mu`` during the phase, in (0, 1]
-    :param loops: Act by the policy's distribution where the observation was already seen in the episode
     """
 
-    def __init__(self, inner: BehaviourPolicy, start: int, epsilon: float = 0.2, loops: bool = False) -> None:
+    def __init__(self, inner: BehaviourPolicy, start: int, epsilon: float = 0.2) -> None:
         if not 0 < epsilon <= 1:
             raise ValueError(f"epsilon must be in (0, 1], got {epsilon}")
-        self.inner, self.start, self.epsilon, self.loops = inner, start, epsilon, loops
+        self.inner, self.start, self.epsilon = inner, start, epsilon
         self.model: Optional["BaseAlgorithm"] = None
         self._greedy: list[float] = []
-        self._looping: list[float] = []
-        self._seen: list[set[bytes]] = []  # per env, the observations of its episode under way (``loops``)
 
     def setup(self, model: "BaseAlgorithm") -> None:
         self.model = model
@@ -53,28 +46,10 @@ class GreedyPhase(BehaviourPolicy):
             return step
         onehot = th.nn.functional.one_hot(probs.argmax(-1), probs.shape[-1]).to(probs.dtype)
         mu = (1 - self.epsilon) * onehot + self.epsilon * probs
-        if self.loops:
-            looping = self._looping_envs(observations, episode_starts)
-            mu = th.where(th.as_tensor(looping, device=probs.device)[:, None], probs, mu)
-            self._looping.append(float(looping.mean()))
         actions = th.multinomial(mu, 1).squeeze(-1)
         self._greedy.append(1.0)
         return BehaviourStep(actions, mu, np.full(len(probs), "greedy"), teacher=step.teacher,
                              followed=None if step.followed is None else np.zeros(len(probs), np.float32))
-
-    def _looping_envs(self, observations: Any, episode_starts: np.ndarray) -> np.ndarray:
-        """Per env, whether its observation was already seen in its episode (which then remembers it)."""
-        observations = np.asarray(observations)
-        if len(self._seen) != len(observations):
-            self._seen = [set() for _ in observations]
-        looping = np.zeros(len(observations), dtype=bool)
-        for i, (obs, start) in enumerate(zip(observations, np.asarray(episode_starts, dtype=bool))):
-            if start:
-                self._seen[i] = set()
-            key = np.ascontiguousarray(obs).tobytes()
-            looping[i] = key in self._seen[i]
-            self._seen[i].add(key)
-        return looping
 
     def rollout_start(self) -> None:
         self.inner.rollout_start()
@@ -89,6 +64,4 @@ class GreedyPhase(BehaviourPolicy):
         if "prior/usage" in logger.name_to_value:
             logger.record("prior/usage", logger.name_to_value["prior/usage"] * (1 - share))
         logger.record("behaviour/greedy_phase", share)
-        if self._looping:
-            logger.record("behaviour/greedy_loops", float(np.mean(self._looping)))
-        self._greedy, self._looping = [], []
+        self._greedy = []

@@ -68,8 +68,6 @@ class RunConfig:
     :param greedy_phase: The last this many env steps act by the new policy's argmax (``greedy_epsilon`` of its own
         samples), so that the harvested paths are those the saved argmax walks (0: none)
     :param greedy_epsilon: The policy's own weight in the behaviour during the greedy phase, in (0, 1]
-    :param greedy_loops: In the greedy phase, act by the policy's own distribution where the episode has already
-        shown the observation (a loop of the argmax), ``greedy_epsilon`` elsewhere
     :param ready: The greedy phase starts at its step only if the training success over the last 100 episodes has
         reached this by then; otherwise the run trains on until it has (or until its budget times ``extend`` less the
         phase), then the phase runs its steps: a goal slow to learn gets more env steps (0: the phase never waits)
@@ -120,7 +118,6 @@ class RunConfig:
     consistency_harvest: Optional[int] = None
     greedy_phase: Optional[int] = None
     greedy_epsilon: float = 0.2
-    greedy_loops: bool = False
     ready: Optional[float] = None
     extend: Optional[float] = None
     consistency_epochs: int = 3
@@ -193,8 +190,6 @@ class RunConfig:
             raise ValueError(f"--ready must be in [0, 1] and --extend between 1 and 10, got {self.ready} and {self.extend}")
         if self.ready and not self.greedy_phase:
             raise ValueError("--ready decides when the greedy phase starts: give --greedy-phase too (or --ready 0)")
-        if self.greedy_loops and not self.greedy_phase:
-            raise ValueError("--greedy-loops acts in the greedy phase: give --greedy-phase too")
         if self.greedy_phase and self.mode == "ppo":
             raise ValueError("--greedy-phase is a behaviour of ACER; --mode ppo trains SB3's PPO without one")
         if self.consistency_epochs < 1:

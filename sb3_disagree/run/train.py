@@ -113,7 +113,7 @@ def train(config: RunConfig, out: Path = Path("runs"), resume: Optional[Path] = 
                                      seed=config.seed, horizon=horizon)
         if config.greedy_phase:
             behaviour = GreedyPhase(behaviour or OnPolicyBehaviour(), config.steps - config.greedy_phase,
-                                    config.greedy_epsilon, config.greedy_loops)
+                                    config.greedy_epsilon)
         saved_config = dict(asdict(config), chosen_priors=prior_names, similarities=sims)
         # A run whose greedy phase waits for it to be ready may train up to its budget times `extend`.
         budget = int(config.steps * config.extend) if config.ready else config.steps
