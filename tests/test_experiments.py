@@ -11,6 +11,8 @@ import yaml
 from typer.testing import CliRunner
 
 from sb3_disagree.cli.app import app
+from sb3_disagree.experiments.curves import last_defined
+from sb3_disagree.experiments import report
 from sb3_disagree.experiments.report import (CellSummary, cell_colors, goals_markdown, plot_goals, ratio_markdown,
                                              seeds_markdown, summarize, table_markdown)
 from sb3_disagree.experiments.runner import run_experiment
@@ -114,7 +116,7 @@ def test_runs_go_under_runs_experiments_by_default(zoo, tmp_path, monkeypatch):
     assert (tmp_path / "runs" / "experiments" / "tiny" / "scratch" / "seed-0" / "result.json").exists()
 
 
-def test_summary_numbers_match_the_runs(zoo, tmp_path):
+def test_summary_numbers_match_the_runs(zoo, tmp_path, monkeypatch):
     experiment = load_experiment(str(_grid(tmp_path, zoo, seeds=(0,))))
     out = tmp_path / "results"
     run_experiment(experiment, out, jobs=1)
@@ -136,8 +138,21 @@ def test_summary_numbers_match_the_runs(zoo, tmp_path):
     assert rows[0].endswith(f" {summaries[0].minutes:.1f} |")
     # With one seed, that seed's curve is the mean curve.
     for s in summaries:
-        np.testing.assert_array_equal(s.seed_final, [s.mean[-1]])  # nan where too few episodes ended
+        np.testing.assert_array_equal(s.seed_final, [last_defined(s.mean)])  # nan where too few episodes ended
         assert s.seed_steps_to_90 == [s.steps_to_90]
+        assert s.auc == np.mean(np.nan_to_num(s.mean, nan=0.0))  # a fixed budget: over the whole run
+    # Runs that may wait past the budget (up to twice it) put the grid's end at 640; these stopped at 320, so their
+    # curves end there (a rising line here, by hand): each seed's end is its last value, and the area is over the
+    # 320 steps every run has, not the empty half counted as zero.
+    spec = yaml.safe_load((tmp_path / "tiny.yaml").read_text())
+    spec["run"].update(ready=0.9, extend=2.0, greedy_phase=160)
+    (tmp_path / "tiny.yaml").write_text(yaml.safe_dump(spec))
+    monkeypatch.setattr(report, "success_curve", lambda folder, grid: grid / 640)
+    grid, waiting = summarize(load_experiment(str(tmp_path / "tiny.yaml")), out)
+    assert grid[-1] == 640 and len(grid) == 50
+    for s in waiting:
+        assert np.isnan(s.mean[25:]).all() and s.seed_final == pytest.approx([0.5])
+        assert s.auc == pytest.approx(np.mean(np.arange(1, 26) * 12.8 / 640))  # 0.26, where zeros would give 0.13
     assert seeds_markdown(summaries).count("\n") == 1 + len(summaries)
     # A budget that no run of a cell reached reads "-", not nan.
     summaries[0].at_budgets[experiment.budgets[-1]] = float("nan")

@@ -150,6 +150,12 @@ def first_defined(curve: np.ndarray) -> float:
     return float(defined[0]) if len(defined) else float("nan")
 
 
+def last_defined(curve: np.ndarray) -> float:
+    """The curve's last value (a run shorter than the grid ends in nan), or nan if it has none."""
+    defined = curve[~np.isnan(curve)]
+    return float(defined[-1]) if len(defined) else float("nan")
+
+
 def steps_to(curve: np.ndarray, grid: np.ndarray, level: float) -> Optional[float]:
     """The first grid step where the curve reaches ``level``, or None."""
     hit = np.flatnonzero(np.nan_to_num(curve, nan=-1) >= level)

@@ -16,6 +16,7 @@ from sb3_disagree.experiments.curves import (
     TRAINING_CURVES,
     check_monitor_coverage,
     has_monitors,
+    last_defined,
     mean_and_band,
     progress_curve,
     read_training_curves,
@@ -53,7 +54,7 @@ class CellSummary:
     alone_mean: np.ndarray = field(default_factory=lambda: np.zeros(0))
     alone_greedy: np.ndarray = field(default_factory=lambda: np.zeros(0))  # empty where not measured
     final_greedy_seeds: list[float] = field(default_factory=list)  # empty where not measured
-    seed_final: list[float] = field(default_factory=list)  # each seed's training success at the last grid step
+    seed_final: list[float] = field(default_factory=list)  # each seed's training success at the end of its run
     seed_steps_to_90: list[Optional[float]] = field(default_factory=list)
     seed_curves: list[np.ndarray] = field(default_factory=list)  # each seed's training success on the grid
 
@@ -91,6 +92,9 @@ def summarize(experiment: Experiment, root: Path) -> tuple[np.ndarray, list[Cell
     # A run whose greedy phase waits until it is ready may train past its budget, up to `extend` times it.
     end = max(int(r.config.steps * r.config.extend) if r.config.ready else r.config.steps for r in every_run)
     grid = np.linspace(end / GRID_POINTS, end, GRID_POINTS)
+    # The area under the curve over the budget every run has: a run that stopped there (ready early) has no curve
+    # past it, and counting that as zero would rank a faster learner lower.
+    common = grid <= max(r.config.steps for r in every_run) + grid[0] / 2
     summaries = []
     finished = [r for r in every_run if r.finished(root)]
     stored = read_training_curves(root, grid)
@@ -117,7 +121,10 @@ def summarize(experiment: Experiment, root: Path) -> tuple[np.ndarray, list[Cell
         mean, low, high = mean_and_band(curves)
         usage = np.full(len(grid), np.nan)
         if runs[0].config.mode != "scratch":
-            usage = mean_and_band([progress_curve(f, "prior/usage", grid, smooth=5) for f in folders])[0]
+            usages = [progress_curve(f, "prior/usage", grid, smooth=5) for f in folders]
+            for u, record in zip(usages, records):
+                u[grid > record["steps"] + grid[0] / 2] = np.nan  # the log's last value is not held past the run
+            usage = mean_and_band(usages)[0]
         at = {}
         for b in experiment.budgets:
             i = int(np.searchsorted(grid, b, side="right")) - 1
@@ -129,11 +136,11 @@ def summarize(experiment: Experiment, root: Path) -> tuple[np.ndarray, list[Cell
         summaries.append(CellSummary(
             cell=cell, seeds=[r.seed for r in runs], mean=mean, low=low, high=high, usage=usage,
             steps_to_50=steps_to(mean, grid, 0.5), steps_to_90=steps_to(mean, grid, 0.9), at_budgets=at,
-            auc=float(np.mean(np.nan_to_num(mean, nan=0.0))), final_alone=float(np.mean(alone)),
+            auc=float(np.mean(np.nan_to_num(mean[common], nan=0.0))), final_alone=float(np.mean(alone)),
             final_alone_seeds=alone, fps=float(np.mean([r["fps"] for r in records])),
             minutes=float(np.mean([r["seconds"] for r in records])) / 60, records=records,
             alone_steps=alone_steps, alone_mean=alone_mean, alone_greedy=alone_greedy,
-            final_greedy_seeds=greedy if len(greedy) == len(records) else [], seed_final=[float(c[-1]) for c in curves],
+            final_greedy_seeds=greedy if len(greedy) == len(records) else [], seed_final=[last_defined(c) for c in curves],
             seed_steps_to_90=[steps_to(c, grid, 0.9) for c in curves], seed_curves=curves))
     return grid, summaries
 
@@ -351,7 +358,8 @@ def plot(experiment: Experiment, grid: np.ndarray, summaries: list[CellSummary],
     fig = plt.figure(figsize=(11, 4.2 + legend_height + (3.6 if n_paths else 0)))
     grid_spec = fig.add_gridspec(2 if n_paths else 1, max(n_paths, 2) * 2 if n_paths else 2)
     half = grid_spec.ncols // 2
-    ax1, ax2 = fig.add_subplot(grid_spec[0, :half]), fig.add_subplot(grid_spec[0, half:])
+    ax1 = fig.add_subplot(grid_spec[0, :half])
+    ax2 = fig.add_subplot(grid_spec[0, half:], sharex=ax1)  # the same steps, and their labels thinned alike
     path_axes = [fig.add_subplot(grid_spec[1, 2 * j:2 * j + 2]) for j in range(n_paths)]
     colors = cell_colors(len(summaries))
     for i, s in enumerate(summaries):

@@ -180,6 +180,8 @@ def _body(experiment: Experiment, grid, summaries: list, figure_link: str, note:
                     else "")
     final_how = (" with SB3's `evaluate_policy` from env seeds the run never trained on, greedy and sampled"
                  if any(c.final_greedy_seeds for c in summaries) else "")
+    waits = any(r["config"].get("ready") for c in summaries for r in c.records)
+    auc_over = f"the first {experiment.steps // 1000}k env steps, which every run has" if waits else "the run"
     how = "two runs at a time, one torch thread each"
     threads = {r.get("torch_threads") for c in summaries for r in c.records}
     overlapped = [c.cell for c in summaries if c.records[0]["config"].get("overlap")]
@@ -198,7 +200,7 @@ def _body(experiment: Experiment, grid, summaries: list, figure_link: str, note:
                "followed), mean over seeds with a 95% t-interval (none with fewer than 3 seeds); dashed: the new policy "
                f"alone (no priors, sampled actions, {alone_every}){greedy_curve}. ") +
             "Table: steps to 50%/90% and success at "
-            "the budgets read from the mean training curve; AUC is the mean of that curve over the run; the new policy "
+            f"the budgets read from the mean training curve; AUC is the mean of that curve over {auc_over}; the new policy "
             f"alone (final) is evaluated over {experiment.final_episodes} episodes after training{final_how}, per seed "
             "in brackets.\n")
     if not experiment.goals:  # a goals table gives each seed's numbers already
