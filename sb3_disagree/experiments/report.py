@@ -350,6 +350,7 @@ def plot(experiment: Experiment, grid: np.ndarray, summaries: list[CellSummary],
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    import matplotlib.ticker
 
     n_paths = len(summaries) if experiment.trajectories else 0
     # Curves on the first row; with trajectories, one map per cell on a second row.
@@ -381,6 +382,8 @@ def plot(experiment: Experiment, grid: np.ndarray, summaries: list[CellSummary],
             title=f"{experiment.name}: {experiment.goal}, priors {priors}")
     ax2.set(xlabel="env steps", ylabel="share of steps following the priors", ylim=(-0.02, 1.02),
             title="prior usage (mean over seeds)")
+    for ax in (ax1, ax2):  # "150k", not "150000": six-digit labels run into each other
+        ax.xaxis.set_major_formatter(matplotlib.ticker.FuncFormatter(lambda x, _: f"{x / 1000:g}k" if x else "0"))
     legend_title = None
     if any(len(s.alone_greedy) for s in summaries):
         legend_title = "solid: training; the new policy alone: dashed sampled, dotted greedy"
