@@ -11,8 +11,8 @@ import yaml
 from typer.testing import CliRunner
 
 from sb3_disagree.cli.app import app
-from sb3_disagree.experiments.curves import last_defined
 from sb3_disagree.experiments import report
+from sb3_disagree.experiments.curves import last_defined
 from sb3_disagree.experiments.report import (CellSummary, cell_colors, goals_markdown, plot_goals, ratio_markdown,
                                              seeds_markdown, summarize, table_markdown)
 from sb3_disagree.experiments.runner import run_experiment

@@ -94,7 +94,7 @@ def summarize(experiment: Experiment, root: Path) -> tuple[np.ndarray, list[Cell
     grid = np.linspace(end / GRID_POINTS, end, GRID_POINTS)
     # The area under the curve over the budget every run has: a run that stopped there (ready early) has no curve
     # past it, and counting that as zero would rank a faster learner lower.
-    common = grid <= max(r.config.steps for r in every_run) + grid[0] / 2
+    common = grid <= experiment.steps + grid[0] / 2
     summaries = []
     finished = [r for r in every_run if r.finished(root)]
     stored = read_training_curves(root, grid)
@@ -104,14 +104,16 @@ def summarize(experiment: Experiment, root: Path) -> tuple[np.ndarray, list[Cell
             continue
         folders = [r.folder(root) for r in runs]
         records = [json.loads((f / RESULT).read_text()) for f in folders]
+        # Nothing past a run's own end: a log's last value is not held beyond it.
+        ended = [grid > record["steps"] + grid[0] / 2 for record in records]
         curves = []
-        for run, folder, record in zip(runs, folders, records):
+        for run, folder, record, past in zip(runs, folders, records, ended):
             if has_monitors(folder):
                 limit = run.config.env_kwargs.get("max_episode_steps", MAX_EPISODE_STEPS)
                 legs = 2 if "from_steps" in record else 1  # a continued run lost an unfinished episode per env twice
                 check_monitor_coverage(folder, record["steps"], run.config.n_envs, limit, legs=legs)
                 curve = success_curve(folder, grid)
-                curve[grid > record["steps"] + grid[0] / 2] = np.nan  # nothing past the run's own end
+                curve[past] = np.nan
                 curves.append(curve)
             elif (cell, run.seed) in stored:
                 curves.append(stored[(cell, run.seed)])
@@ -122,8 +124,8 @@ def summarize(experiment: Experiment, root: Path) -> tuple[np.ndarray, list[Cell
         usage = np.full(len(grid), np.nan)
         if runs[0].config.mode != "scratch":
             usages = [progress_curve(f, "prior/usage", grid, smooth=5) for f in folders]
-            for u, record in zip(usages, records):
-                u[grid > record["steps"] + grid[0] / 2] = np.nan  # the log's last value is not held past the run
+            for u, past in zip(usages, ended):
+                u[past] = np.nan
             usage = mean_and_band(usages)[0]
         at = {}
         for b in experiment.budgets:
