@@ -319,7 +319,7 @@ def plot_goals(experiment: Experiment, summaries: list[CellSummary], out: Path, 
     bases, rows = goal_rows(experiment, summaries, root)
     colors = cell_colors(len(bases))
     width = 0.8 / len(bases)
-    fig, ax = plt.subplots(figsize=(max(6.0, 1.1 * len(rows)), 4.2))
+    fig, ax = plt.subplots(figsize=(max(8.0, 1.1 * len(rows)), 4.2))  # the title's width at least
     for j, b in enumerate(bases):
         label = f"{b}: greedy (bar, seeds as dots), sampled (black tick)"
         for i, row in enumerate(rows):
